@@ -1,0 +1,21 @@
+"""Errors gpu_core raises; each carries a message a user can act on."""
+
+
+class GpuGiError(Exception):
+    """Base class of every error gpu_core raises on purpose."""
+
+
+class DeviceError(GpuGiError):
+    """No usable OpenCL device, or a kernel program failed to build."""
+
+
+class SceneError(GpuGiError):
+    """The scene cannot be rendered as given (after validation)."""
+
+
+class BudgetError(GpuGiError):
+    """A buffer would exceed the device memory budget."""
+
+
+class RenderCancelled(GpuGiError):
+    """The caller asked to stop (Esc in Blender) between two kernel batches."""
