@@ -44,4 +44,60 @@ typedef struct {
 #define KDTREE_MAKE()                                                        \
     ((KdTree){kd_nodes, kd_leaf_tris, kd_verts, kd_bmin.xyz, kd_bmax.xyz})
 
+
+/* A material row (64 bytes); see gpu_core/layout.py MATERIAL_DTYPE. */
+typedef struct {
+    float4 base_color; /* rgb; w = alpha */
+    float4 emission;   /* rgb radiance (colour x strength) */
+    float metallic;
+    float roughness;
+    float transmission;
+    float ior;
+    int texture; /* index into the texture table, -1 for none */
+    int pad0, pad1, pad2;
+} Material;
+
+#define LIGHT_POINT 0
+#define LIGHT_SPOT 1
+#define LIGHT_SUN 2
+#define LIGHT_AREA 3
+#define LIGHT_MESH 4 /* emissive triangles, sampled as one light */
+
+/* A light row (96 bytes); see gpu_core/layout.py LIGHT_DTYPE. */
+typedef struct {
+    float4 position;  /* xyz; w = sphere radius (point, spot) */
+    float4 direction; /* xyz unit, where it points; w = cos of half spot angle */
+    float4 axis_u;    /* area: full size along X; w = 1/spot smooth width */
+    float4 axis_v;    /* area: full size along Y; w = cos of sun half angle */
+    float4 power;     /* rgb: watts (sun: W/m^2); w = area (area lights) */
+    int kind;
+    int shape; /* area: 0 rectangle, 1 ellipse */
+    float pick_pdf; /* probability of choosing this light */
+    int pad0;
+} Light;
+
+/* The camera (112 bytes); see gpu_core/layout.py CAMERA_DTYPE. */
+typedef struct {
+    float4 right;   /* camera X axis in world space */
+    float4 up;      /* camera Y axis */
+    float4 back;    /* camera Z axis (it looks down -Z) */
+    float4 origin;  /* position */
+    float4 window;  /* x0, x1, y0, y1 on the plane z = -1 (ortho: scene units) */
+    int kind;       /* 0 perspective, 1 orthographic */
+    int width;      /* full image size in pixels */
+    int height;
+    int pad0;
+    float clip_start;
+    float clip_end;
+    float pad1, pad2;
+} Camera;
+
+/* A texture's place in the shared float4 atlas. */
+typedef struct {
+    int offset;
+    int width;
+    int height;
+    int pad0;
+} TextureInfo;
+
 #endif

@@ -1,0 +1,163 @@
+/* The image kernel: camera paths through mirrors and glass to diffuse
+ * surfaces, which take direct light from every light with shadow rays. */
+#include "types.h"
+#include "rng.h"
+#include "sampling.h"
+#include "camera.h"
+#include "lights.h"
+#include "bsdf.h"
+#include "texture.h"
+#include "kdtree_traverse.h"
+
+#define RENDER_MAX_PASSTHROUGH 64
+
+/* What the kernel needs to know about the surface at a hit. */
+typedef struct {
+    float3 p;     /* position */
+    float3 ng;    /* geometric normal facing the incoming ray */
+    float3 ns;    /* shading normal on the same side as ng */
+    float3 ng_raw; /* geometric normal as wound */
+    float2 uv;
+    int material;
+} SurfacePoint;
+
+inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tri_normals,
+                                   const __global float2 *tri_uvs, const __global int *tri_material,
+                                   float3 org, float3 dir, const Hit *hit) {
+    SurfacePoint s;
+    int t = hit->tri;
+    float3 v0 = tree->verts[3 * t].xyz, v1 = tree->verts[3 * t + 1].xyz, v2 = tree->verts[3 * t + 2].xyz;
+    float w = 1.0f - hit->u - hit->v;
+    s.p = w * v0 + hit->u * v1 + hit->v * v2;
+    float3 cr = cross(v1 - v0, v2 - v0);
+    float len = length(cr);
+    s.ng_raw = len > 0.0f ? cr / len : (float3)(0.0f, 0.0f, 1.0f);
+    s.ng = dot(s.ng_raw, dir) > 0.0f ? -s.ng_raw : s.ng_raw;
+    float3 ns = w * tri_normals[3 * t].xyz + hit->u * tri_normals[3 * t + 1].xyz + hit->v * tri_normals[3 * t + 2].xyz;
+    float ls = length(ns);
+    ns = ls > 1e-20f ? ns / ls : s.ng;
+    s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
+    s.uv = w * tri_uvs[3 * t] + hit->u * tri_uvs[3 * t + 1] + hit->v * tri_uvs[3 * t + 2];
+    s.material = tri_material[t];
+    return s;
+}
+
+/* Direct light at a diffuse point from every light, world included. */
+inline float3 Render_direct(const KdTree *tree, const __global Light *lights, int light_count,
+                            const Emitters *em, float3 world, float3 p, float3 n, float eps, Rng *rng) {
+    float3 sum = (float3)(0.0f);
+    float3 org = p + eps * n;
+    for (int i = 0; i < light_count; ++i) {
+        Light l = lights[i];
+        float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
+        LightSample ls = Light_sample(&l, em, p, n, u0, u1, u2);
+        if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f)) continue;
+        float tmax = ls.dist < LIGHT_FAR ? ls.dist * (1.0f - 1e-4f) - eps : LIGHT_FAR;
+        if (tmax > 0.0f && !KdTree_occluded(tree, org, ls.dir, 0.0f, tmax)) sum += ls.value;
+    }
+    if (world.x > 0.0f || world.y > 0.0f || world.z > 0.0f) {
+        LightSample ls = Light_sample_world(world, n, Rng_next(rng), Rng_next(rng));
+        if (!KdTree_occluded(tree, org, ls.dir, 0.0f, LIGHT_FAR)) sum += ls.value;
+    }
+    return sum;
+}
+
+/* One work item per pixel of the batch; all samples of the pixel.
+ * window = (width, height, pixels in this batch, first pixel of the batch)
+ * of the render window, whose lower-left pixel is window_origin. */
+__kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
+                            const __global float2 *tri_uvs, const __global int *tri_material,
+                            const __global Material *materials, const __global Light *lights,
+                            const int light_count, const __global int *emit_tris,
+                            const __global float *emit_cdf, const int emit_count,
+                            const __global float4 *tex_atlas, const __global TextureInfo *tex_infos,
+                            const __global Camera *camera_buf, const float4 world,
+                            const int4 window, const int2 window_origin, const int samples, const int max_bounces,
+                            const uint seed, const float eps, const float clamp_value,
+                            __global float4 *out_combined, __global float *out_depth,
+                            __global float4 *out_normal) {
+    int i = get_global_id(0);
+    int g = window.w + i; /* index in the render window */
+    if (i >= window.z || g >= window.x * window.y) return;
+    KdTree tree = KDTREE_MAKE();
+    Emitters em = {emit_tris, emit_cdf, emit_count, kd_verts, tri_material, materials};
+    Camera cam = *camera_buf;
+    int wx = g % window.x, wy = g / window.x;
+    int px = window_origin.x + wx, py = window_origin.y + wy;
+    float3 sky = world.xyz;
+    bool transparent = world.w > 0.0f;
+
+    float3 total = (float3)(0.0f);
+    float alpha_sum = 0.0f;
+    float depth = 1e10f;
+    float3 normal = (float3)(0.0f);
+    for (int s = 0; s < samples; ++s) {
+        Rng rng = Rng_make((uint)(py * cam.width + px), (uint)s, seed);
+        float3 org, dir;
+        float tmin, tmax;
+        Camera_ray(&cam, px + Rng_next(&rng), py + Rng_next(&rng), &org, &dir, &tmin, &tmax);
+        float3 throughput = (float3)(1.0f);
+        float3 radiance = (float3)(0.0f);
+        float alpha = 1.0f;
+        int bounces = 0, passes = 0;
+        while (true) {
+            Hit hit;
+            if (!KdTree_intersect(&tree, org, dir, tmin, tmax, &hit)) {
+                if (bounces == 0 && passes == 0 && transparent) alpha = 0.0f;
+                else radiance += throughput * sky;
+                break;
+            }
+            SurfacePoint sp = Render_surface(&tree, tri_normals, tri_uvs, tri_material, org, dir, &hit);
+            Material m = materials[sp.material];
+            float3 base = m.base_color.xyz;
+            float mat_alpha = m.base_color.w;
+            if (m.texture >= 0) {
+                float4 tex = Texture_sample(tex_atlas, tex_infos, m.texture, sp.uv);
+                base *= tex.xyz;
+            }
+            float peps = eps * (1.0f + 1e-3f * fmax(fmax(fabs(sp.p.x), fabs(sp.p.y)), fabs(sp.p.z)));
+            /* stochastic alpha: pass straight through */
+            if (mat_alpha < 1.0f && Rng_next(&rng) >= mat_alpha && passes < RENDER_MAX_PASSTHROUGH) {
+                passes++;
+                org = sp.p - peps * sp.ng;
+                tmin = 0.0f;
+                tmax = 3.0e38f;
+                continue;
+            }
+            if (bounces == 0 && s == 0) {
+                depth = Camera_depth(&cam, sp.p);
+                normal = sp.ns;
+            }
+            radiance += throughput * m.emission.xyz;
+            int lobe = Bsdf_pick(&m, Rng_next(&rng));
+            if (lobe == BSDF_DIFFUSE || bounces >= max_bounces) {
+                if (lobe == BSDF_DIFFUSE) {
+                    float3 e = Render_direct(&tree, lights, light_count, &em, sky, sp.p, sp.ns, peps, &rng);
+                    radiance += throughput * base * (1.0f / PI_F) * e;
+                }
+                break;
+            }
+            bool refracted = false;
+            if (lobe == BSDF_MIRROR) {
+                dir = Bsdf_reflect(dir, sp.ns);
+                if (dot(dir, sp.ng) < 0.0f) dir = Bsdf_reflect(dir, sp.ng);
+                throughput *= base;
+            } else {
+                dir = Bsdf_glass(dir, sp.ng_raw, m.ior, Rng_next(&rng), &refracted);
+                if (refracted) throughput *= base;
+            }
+            org = sp.p + (refracted ? -peps : peps) * sp.ng;
+            tmin = 0.0f;
+            tmax = 3.0e38f;
+            bounces++;
+        }
+        if (clamp_value > 0.0f) radiance = fmin(radiance, (float3)(clamp_value));
+        if (!(isfinite(radiance.x) && isfinite(radiance.y) && isfinite(radiance.z))) radiance = (float3)(0.0f);
+        total += radiance;
+        alpha_sum += alpha;
+    }
+    float inv = 1.0f / (float)samples;
+    out_combined[g] = (float4)(total * inv, alpha_sum * inv);
+    out_depth[g] = depth;
+    out_normal[g] = (float4)(normal, 0.0f);
+}

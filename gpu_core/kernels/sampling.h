@@ -1,0 +1,53 @@
+/* Sampling of directions and shapes used by lights, BSDFs and the camera. */
+#ifndef GPUGI_SAMPLING_H
+#define GPUGI_SAMPLING_H
+
+#define PI_F 3.14159265358979f
+
+/* Two unit vectors t, b completing n to an orthonormal frame. */
+inline void Sampling_frame(float3 n, float3 *t, float3 *b) {
+    float s = n.z >= 0.0f ? 1.0f : -1.0f;
+    float a = -1.0f / (s + n.z);
+    float c = n.x * n.y * a;
+    *t = (float3)(1.0f + s * n.x * n.x * a, s * c, -s * n.x);
+    *b = (float3)(c, s + n.y * n.y * a, -n.y);
+}
+
+/* Point in the unit disk (polar mapping). */
+inline float2 Sampling_disk(float u1, float u2) {
+    float r = sqrt(u1);
+    float phi = 2.0f * PI_F * u2;
+    return (float2)(r * cos(phi), r * sin(phi));
+}
+
+/* Cosine-distributed direction around n. */
+inline float3 Sampling_cosine(float3 n, float u1, float u2) {
+    float3 t, b;
+    Sampling_frame(n, &t, &b);
+    float2 d = Sampling_disk(u1, u2);
+    float z = sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y));
+    return normalize(d.x * t + d.y * b + z * n);
+}
+
+/* Uniform direction in the cone around axis with cos(half angle) cos_max. */
+inline float3 Sampling_cone(float3 axis, float cos_max, float u1, float u2) {
+    float3 t, b;
+    Sampling_frame(axis, &t, &b);
+    float cos_t = 1.0f - u1 * (1.0f - cos_max);
+    float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
+    float phi = 2.0f * PI_F * u2;
+    return normalize(sin_t * cos(phi) * t + sin_t * sin(phi) * b + cos_t * axis);
+}
+
+/* Uniform point in a triangle as barycentrics (u, v). */
+inline float2 Sampling_triangle(float u1, float u2) {
+    float s = sqrt(u1);
+    return (float2)(1.0f - s, u2 * s);
+}
+
+/* Rec. 709 luminance. */
+inline float Sampling_luminance(float3 c) {
+    return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+}
+
+#endif
