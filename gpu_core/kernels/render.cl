@@ -45,12 +45,14 @@ inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tr
 /* Direct light at a diffuse point from every light, world included. */
 inline float3 Render_direct(const KdTree *tree, const __global Light *lights, int light_count,
                             const Emitters *em, float3 world, float3 p, float3 n, float eps, Rng *rng) {
+    /* shadow rays leave from just above the surface */
     float3 sum = (float3)(0.0f);
     float3 org = p + eps * n;
     for (int i = 0; i < light_count; ++i) {
         Light l = lights[i];
         float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
-        LightSample ls = Light_sample(&l, em, p, n, u0, u1, u2);
+        /* sample from the offset origin so the shadow ray ends at the light */
+        LightSample ls = Light_sample(&l, em, org, n, u0, u1, u2);
         if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f)) continue;
         float tmax = ls.dist < LIGHT_FAR ? ls.dist * (1.0f - 1e-4f) - eps : LIGHT_FAR;
         if (tmax > 0.0f && !KdTree_occluded(tree, org, ls.dir, 0.0f, tmax)) sum += ls.value;
