@@ -104,12 +104,16 @@ class Renderer:
             plan.append("textures")
         if _emissive_triangles(scene)[0].size:
             plan.append("mesh_lights")
+        defines = {}
+        if (scene.materials.alpha[np.unique(scene.material_ids)] < 1.0).any():
+            plan.append("alpha_shadows")
+            defines["RENDER_HAS_ALPHA"] = 1
         _check_stop(should_stop)
         with timer.stage("upload"):
             up = self._upload(scene, timer)
         _check_stop(should_stop)
         with timer.stage("compile"):
-            program = self.device.program("render.cl")
+            program = self.device.program("render.cl", defines)
         with timer.stage("render"):
             passes, batches = self._run(program, up, scene, settings, progress, should_stop)
         stats = {
@@ -185,7 +189,7 @@ class Renderer:
         combined, depth, normal = dev.empty(total * 16), dev.empty(total * 4), dev.empty(total * 16)
         world = up.world.copy()
         world[3] = 1.0 if settings.transparent_background else 0.0
-        kernel = program.Render_pixels
+        kernel = cl.Kernel(program, "Render_pixels")
         start, batch, batches = 0, min(settings.batch_pixels, total), 0
         while start < total:
             count = min(batch, total - start)

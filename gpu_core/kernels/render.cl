@@ -42,9 +42,33 @@ inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tr
     return s;
 }
 
+/* Fraction of light passing along a shadow ray: 0 when an opaque surface
+ * blocks it; with see-through (alpha) materials in the scene, the product of
+ * their transparencies. */
+inline float Render_visibility(const KdTree *tree, const __global int *tri_material,
+                               const __global Material *materials, float3 org, float3 dir,
+                               float tmax, float eps) {
+#ifdef RENDER_HAS_ALPHA
+    float vis = 1.0f, tmin = 0.0f;
+    for (int i = 0; i < RENDER_MAX_PASSTHROUGH; ++i) {
+        Hit hit;
+        if (!KdTree_intersect(tree, org, dir, tmin, tmax, &hit)) return vis;
+        float alpha = materials[tri_material[hit.tri]].base_color.w;
+        if (alpha >= 1.0f) return 0.0f;
+        vis *= 1.0f - alpha;
+        tmin = hit.t + eps;
+    }
+    return 0.0f;
+#else
+    return KdTree_occluded(tree, org, dir, 0.0f, tmax) ? 0.0f : 1.0f;
+#endif
+}
+
 /* Direct light at a diffuse point from every light, world included. */
-inline float3 Render_direct(const KdTree *tree, const __global Light *lights, int light_count,
-                            const Emitters *em, float3 world, float3 p, float3 n, float eps, Rng *rng) {
+inline float3 Render_direct(const KdTree *tree, const __global int *tri_material,
+                            const __global Material *materials, const __global Light *lights,
+                            int light_count, const Emitters *em, float3 world, float3 p, float3 n,
+                            float eps, Rng *rng) {
     /* shadow rays leave from just above the surface */
     float3 sum = (float3)(0.0f);
     float3 org = p + eps * n;
@@ -55,11 +79,11 @@ inline float3 Render_direct(const KdTree *tree, const __global Light *lights, in
         LightSample ls = Light_sample(&l, em, org, n, u0, u1, u2);
         if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f)) continue;
         float tmax = ls.dist < LIGHT_FAR ? ls.dist * (1.0f - 1e-4f) - eps : LIGHT_FAR;
-        if (tmax > 0.0f && !KdTree_occluded(tree, org, ls.dir, 0.0f, tmax)) sum += ls.value;
+        if (tmax > 0.0f) sum += ls.value * Render_visibility(tree, tri_material, materials, org, ls.dir, tmax, eps);
     }
     if (world.x > 0.0f || world.y > 0.0f || world.z > 0.0f) {
         LightSample ls = Light_sample_world(world, n, Rng_next(rng), Rng_next(rng));
-        if (!KdTree_occluded(tree, org, ls.dir, 0.0f, LIGHT_FAR)) sum += ls.value;
+        sum += ls.value * Render_visibility(tree, tri_material, materials, org, ls.dir, LIGHT_FAR, eps);
     }
     return sum;
 }
@@ -134,7 +158,7 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
             int lobe = Bsdf_pick(&m, Rng_next(&rng));
             if (lobe == BSDF_DIFFUSE || bounces >= max_bounces) {
                 if (lobe == BSDF_DIFFUSE) {
-                    float3 e = Render_direct(&tree, lights, light_count, &em, sky, sp.p, sp.ns, peps, &rng);
+                    float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, sp.p, sp.ns, peps, &rng);
                     radiance += throughput * base * (1.0f / PI_F) * e;
                 }
                 break;
