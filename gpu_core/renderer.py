@@ -100,6 +100,8 @@ class Renderer:
         with timer.stage("validate"):
             scene = validate(scene)
         plan = ["validate", "kdtree", "direct_light"]
+        if settings.diffuse_bounces > 0:
+            plan.append("path_traced_indirect")
         if scene.textures:
             plan.append("textures")
         if _emissive_triangles(scene)[0].size:
@@ -200,7 +202,8 @@ class Renderer:
                 up.lights, np.int32(up.light_count), up.emit_tris, up.emit_cdf, np.int32(up.emit_count),
                 up.atlas, up.texture_infos, up.camera, world,
                 np.array([w, h, count, start], np.int32), np.array([x0, y0], np.int32),
-                np.int32(settings.samples), np.int32(settings.max_bounces), np.uint32(settings.seed),
+                np.int32(settings.samples), np.int32(settings.max_bounces), np.int32(settings.diffuse_bounces),
+                np.uint32(settings.seed),
                 np.float32(up.eps), np.float32(settings.clamp),
                 combined, depth, normal,
             )

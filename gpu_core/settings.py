@@ -11,6 +11,7 @@ class RenderSettings:
 
     samples: int = 16  # camera paths per pixel (anti-aliasing and light sampling)
     max_bounces: int = 8  # mirror/glass bounces followed from the camera
+    diffuse_bounces: int = 0  # path-traced diffuse bounces (0 = direct light only)
     seed: int = 0  # random sequence; change for a different noise pattern
     clamp: float = 0.0  # clamp of one sample's radiance; 0 = off
     transparent_background: bool = False  # film alpha 0 where the world is seen
@@ -21,6 +22,7 @@ class RenderSettings:
         return RenderSettings(
             samples=max(1, int(self.samples)),
             max_bounces=max(0, int(self.max_bounces)),
+            diffuse_bounces=max(0, int(self.diffuse_bounces)),
             seed=int(self.seed) & 0xFFFFFFFF,
             clamp=max(0.0, float(self.clamp)),
             transparent_background=bool(self.transparent_background),

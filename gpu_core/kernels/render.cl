@@ -99,6 +99,7 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                             const __global float4 *tex_atlas, const __global TextureInfo *tex_infos,
                             const __global Camera *camera_buf, const float4 world,
                             const int4 window, const int2 window_origin, const int samples, const int max_bounces,
+                            const int max_diffuse,
                             const uint seed, const float eps, const float clamp_value,
                             __global float4 *out_combined, __global float *out_depth,
                             __global float4 *out_normal) {
@@ -125,12 +126,14 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
         float3 throughput = (float3)(1.0f);
         float3 radiance = (float3)(0.0f);
         float alpha = 1.0f;
-        int bounces = 0, passes = 0;
+        int bounces = 0, diffuse = 0, passes = 0;
+        /* after a diffuse bounce, lights and the world were already sampled
+         * directly (next-event estimation): hitting them again is not counted */
         while (true) {
             Hit hit;
             if (!KdTree_intersect(&tree, org, dir, tmin, tmax, &hit)) {
                 if (bounces == 0 && passes == 0 && transparent) alpha = 0.0f;
-                else radiance += throughput * sky;
+                else if (diffuse == 0) radiance += throughput * sky;
                 break;
             }
             SurfacePoint sp = Render_surface(&tree, tri_normals, tri_uvs, tri_material, org, dir, &hit);
@@ -154,15 +157,31 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 depth = Camera_depth(&cam, sp.p);
                 normal = sp.ns;
             }
-            radiance += throughput * m.emission.xyz;
+            if (diffuse == 0) radiance += throughput * m.emission.xyz;
             int lobe = Bsdf_pick(&m, Rng_next(&rng));
-            if (lobe == BSDF_DIFFUSE || bounces >= max_bounces) {
-                if (lobe == BSDF_DIFFUSE) {
-                    float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, sp.p, sp.ns, peps, &rng);
-                    radiance += throughput * base * (1.0f / PI_F) * e;
+            if (lobe == BSDF_DIFFUSE) {
+                float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, sp.p, sp.ns, peps, &rng);
+                radiance += throughput * base * (1.0f / PI_F) * e;
+                /* path-traced indirect light: cosine sampling cancels the
+                 * Lambert cosine/pi, leaving the albedo; Russian roulette
+                 * after two diffuse bounces keeps the estimate unbiased */
+                if (diffuse >= max_diffuse || bounces >= max_bounces + max_diffuse) break;
+                throughput *= base;
+                if (diffuse >= 2) {
+                    float q = fmin(fmax(fmax(throughput.x, throughput.y), throughput.z), 0.95f);
+                    if (Rng_next(&rng) >= q) break;
+                    throughput /= q;
                 }
-                break;
+                dir = Sampling_cosine(sp.ns, Rng_next(&rng), Rng_next(&rng));
+                if (dot(dir, sp.ng) <= 0.0f) break;
+                org = sp.p + peps * sp.ng;
+                tmin = 0.0f;
+                tmax = 3.0e38f;
+                diffuse++;
+                bounces++;
+                continue;
             }
+            if (bounces >= max_bounces + max_diffuse) break;
             bool refracted = false;
             if (lobe == BSDF_MIRROR) {
                 dir = Bsdf_reflect(dir, sp.ns);
