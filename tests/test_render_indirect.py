@@ -32,10 +32,10 @@ def test_furnace_box_radiance_is_emission_over_one_minus_albedo(device, albedo):
 
 def test_albedo_one_closed_box_stays_bounded_and_finite(device):
     scene = closed_box(1.0, 1.0)
-    img = Renderer(device).render(scene, RenderSettings(samples=8, diffuse_bounces=16)).passes["Combined"]
+    img = Renderer(device).render(scene, RenderSettings(samples=256, diffuse_bounces=16)).passes["Combined"]
     assert np.isfinite(img).all()
-    # emission 1 collected at most once per bounce: the expected radiance is at most 17
-    assert img[..., :3].mean() <= 17.0
+    # the emitter seen directly, then one unit of direct light at each of the 17 hits: 18, not infinity
+    assert abs(img[..., :3].mean() / 18.0 - 1) < 0.03
 
 
 def test_zero_diffuse_bounces_is_direct_light_only(device):
