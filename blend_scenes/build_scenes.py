@@ -4,7 +4,10 @@
 
 Every scene uses only what the exporter supports (Principled BSDF, Diffuse,
 Glossy, Glass and Emission shaders, the world Background) so Cycles and GPU GI
-render the same thing. Units are metres and watts.
+render the same thing. Units are metres and watts; powers are chosen so each
+scene is well exposed in Cycles with the AgX view (see check_exposure.py).
+The render engine is GPU GI when the add-on is registered in this process,
+Cycles otherwise; tests and the command line pick the engine at render time.
 """
 
 from __future__ import annotations
@@ -14,38 +17,50 @@ import math
 import os
 
 import bpy
+import mathutils
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+RESOLUTION = 256
+CYCLES_SAMPLES = 64
 
 
-# -- building blocks ---------------------------------------------------------------
+# -- file and render settings -------------------------------------------------------
 
 
 def reset(name: str):
-    """An empty file with sane render settings."""
-    bpy.ops.wm.read_homefile(use_empty=True)
+    """An empty file (factory settings) with the shared render settings."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
     scene.name = name
-    scene.render.resolution_x = 256
-    scene.render.resolution_y = 256
+    try:
+        scene.render.engine = "GPUGI"
+    except TypeError:  # the add-on is not registered in this process
+        scene.render.engine = "CYCLES"
+    scene.render.resolution_x = RESOLUTION
+    scene.render.resolution_y = RESOLUTION
     scene.render.resolution_percentage = 100
-    scene.cycles.samples = 64
+    scene.cycles.samples = CYCLES_SAMPLES
+    scene.view_settings.view_transform = "AgX"
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure = 0.0
     scene.world = bpy.data.worlds.new("World")
     set_world(scene, (0.0, 0.0, 0.0), 0.0)
     return scene
 
 
 def set_world(scene, color, strength):
-    world = scene.world
-    world.use_nodes = True
-    background = world.node_tree.nodes["Background"]
+    """The world's Background colour and strength (the only world feature used)."""
+    background = scene.world.node_tree.nodes["Background"]
     background.inputs["Color"].default_value = (*color, 1.0)
     background.inputs["Strength"].default_value = strength
 
 
+# -- materials ----------------------------------------------------------------------
+
+
 def principled(name, color, metallic=0.0, roughness=0.5, transmission=0.0, ior=1.5, emission=None, strength=0.0):
+    """A Principled BSDF material with the inputs the exporter reads."""
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
     node = mat.node_tree.nodes["Principled BSDF"]
     node.inputs["Base Color"].default_value = (*color, 1.0)
     node.inputs["Metallic"].default_value = metallic
@@ -61,7 +76,6 @@ def principled(name, color, metallic=0.0, roughness=0.5, transmission=0.0, ior=1
 def shader(name, kind, **inputs):
     """A material made of one shader node (Diffuse, Glossy, Glass, Emission)."""
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
     tree = mat.node_tree
     tree.nodes.clear()
     out = tree.nodes.new("ShaderNodeOutputMaterial")
@@ -72,10 +86,15 @@ def shader(name, kind, **inputs):
     return mat
 
 
-def assign(obj, mat):
+def assign(obj, *mats):
+    """Give ``obj`` exactly these material slots (face indices refer to them)."""
     obj.data.materials.clear()
-    obj.data.materials.append(mat)
+    for mat in mats:
+        obj.data.materials.append(mat)
     return obj
+
+
+# -- objects ------------------------------------------------------------------------
 
 
 def plane(size, location=(0, 0, 0), rotation=(0, 0, 0), mat=None, name=None):
@@ -86,19 +105,25 @@ def plane(size, location=(0, 0, 0), rotation=(0, 0, 0), mat=None, name=None):
     return assign(obj, mat) if mat else obj
 
 
-def cube(size, location, mat, rotation=(0, 0, 0), scale=(1, 1, 1)):
+def cube(size, location, mat, rotation=(0, 0, 0), scale=(1, 1, 1), name=None):
     bpy.ops.mesh.primitive_cube_add(size=size, location=location, rotation=rotation, scale=scale)
-    return assign(bpy.context.object, mat)
+    obj = bpy.context.object
+    if name:
+        obj.name = name
+    return assign(obj, mat)
 
 
-def sphere(radius, location, mat, segments=48, rings=24):
+def sphere(radius, location, mat, name, segments=48, rings=24):
+    """A smooth-shaded UV sphere."""
     bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=segments, ring_count=rings)
     obj = bpy.context.object
+    obj.name = name
     bpy.ops.object.shade_smooth()
     return assign(obj, mat)
 
 
 def light(kind, location, energy, rotation=(0, 0, 0), color=(1, 1, 1), **props):
+    """A light object of ``kind`` with energy in W (sun: W/m^2) and extra light properties."""
     data = bpy.data.lights.new(f"{kind.title()} Light", kind)
     data.energy = energy
     data.color = color
@@ -112,24 +137,24 @@ def light(kind, location, energy, rotation=(0, 0, 0), color=(1, 1, 1), **props):
 
 
 def camera(location, look_at, lens=35.0):
+    """The scene camera at ``location`` looking at ``look_at`` (Z up)."""
     data = bpy.data.cameras.new("Camera")
     data.lens = lens
     obj = bpy.data.objects.new("Camera", data)
     obj.location = location
+    direction = mathutils.Vector(look_at) - mathutils.Vector(location)
+    obj.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
     bpy.context.scene.collection.objects.link(obj)
-    direction = [t - l for t, l in zip(look_at, location)]
-    import mathutils
-
-    obj.rotation_euler = mathutils.Vector(direction).to_track_quat("-Z", "Y").to_euler()
     bpy.context.scene.camera = obj
     return obj
 
 
-# -- scenes ----------------------------------------------------------------------
+# -- scenes -------------------------------------------------------------------------
 
 
 def cornell_box():
-    """The classic box, 2 m wide: red and green walls, area light, mirror box, glass sphere."""
+    """The classic box, 2 m wide and open at the front: red and green side walls,
+    an area light under the ceiling, a mirror sphere and a glass sphere."""
     reset("cornell_box")
     white = principled("White", (0.73, 0.73, 0.73), roughness=1.0)
     red = principled("Red", (0.63, 0.065, 0.05), roughness=1.0)
@@ -140,41 +165,45 @@ def cornell_box():
     plane(2, (-1, 0, 1), (0, math.pi / 2, 0), red, "Left")
     plane(2, (1, 0, 1), (0, -math.pi / 2, 0), green, "Right")
     mirror = principled("Mirror", (0.9, 0.9, 0.9), metallic=1.0, roughness=0.0)
-    cube(0.6, (-0.35, 0.35, 0.6), mirror, rotation=(0, 0, math.radians(18)), scale=(1, 1, 2)).name = "Mirror Box"
+    sphere(0.35, (-0.42, 0.35, 0.35), mirror, "Mirror Sphere")
     glass = principled("Glass", (1, 1, 1), roughness=0.0, transmission=1.0, ior=1.5)
-    sphere(0.3, (0.4, -0.2, 0.3), glass).name = "Glass Sphere"
+    sphere(0.35, (0.4, -0.3, 0.35), glass, "Glass Sphere")
     light("AREA", (0, 0, 1.98), 60.0, color=(1.0, 0.85, 0.7), size=0.5)
     camera((0, -3.4, 1.0), (0, 0, 1.0), lens=38)
 
 
 def box_torus():
-    """The seed's closed box with a specular torus (~600 triangles) and one light."""
+    """The seed's closed box (floor faces with their own material) around a
+    gold mirror torus of 576 triangles, lit by one point light."""
     reset("box_torus")
     walls = principled("Walls", (0.7, 0.7, 0.7), roughness=1.0)
     floor = principled("Floor", (0.6, 0.5, 0.35), roughness=1.0)
-    box = cube(2, (0, 0, 1), walls)
-    box.name = "Box"
+    box = cube(2, (0, 0, 1), walls, name="Box")
+    assign(box, walls, floor)
+    # normals point into the box; the bottom face takes the second material
     bpy.ops.object.mode_set(mode="EDIT")
     bpy.ops.mesh.select_all(action="SELECT")
     bpy.ops.mesh.flip_normals()
     bpy.ops.object.mode_set(mode="OBJECT")
-    plane(1.98, (0, 0, 0.001), mat=floor, name="Floor")
+    for polygon in box.data.polygons:
+        polygon.material_index = 1 if polygon.center.z < -0.99 else 0
     bpy.ops.mesh.primitive_torus_add(major_radius=0.45, minor_radius=0.17, major_segments=24, minor_segments=12,
                                      location=(0, 0.1, 0.5), rotation=(math.radians(60), 0, math.radians(20)))
     torus = bpy.context.object
     torus.name = "Torus"
     bpy.ops.object.shade_smooth()
     assign(torus, principled("Gold", (1.0, 0.77, 0.34), metallic=1.0, roughness=0.0))
-    light("POINT", (0.3, -0.4, 1.8), 120.0, shadow_soft_size=0.05)
+    light("POINT", (0.3, -0.4, 1.8), 20.0, shadow_soft_size=0.05)
     camera((0, -0.95, 1.2), (0, 0.2, 0.55), lens=18)
 
 
 def caustics():
-    """A glass sphere over a diffuse floor under a spot light: a bright caustic."""
+    """A glass sphere (Glass BSDF) 0.4 m over a diffuse floor under a narrow
+    spot light: the sphere focuses the light into a bright caustic."""
     reset("caustics")
     plane(6, mat=principled("Floor", (0.8, 0.8, 0.8), roughness=1.0), name="Floor")
     plane(6, (0, 2, 1.5), (math.pi / 2, 0, 0), principled("Wall", (0.5, 0.6, 0.8), roughness=1.0), "Wall")
-    sphere(0.5, (0, 0, 0.9), shader("Glass", "ShaderNodeBsdfGlass", IOR=1.5, Roughness=0.0)).name = "Glass Sphere"
+    sphere(0.5, (0, 0, 0.9), shader("Glass", "ShaderNodeBsdfGlass", IOR=1.5, Roughness=0.0), "Glass Sphere")
     light("SPOT", (0.0, -0.3, 3.5), 800.0, rotation=(math.radians(-5), 0, 0), spot_size=math.radians(40),
           spot_blend=0.2, shadow_soft_size=0.02)
     set_world(bpy.context.scene, (0.05, 0.05, 0.06), 1.0)
@@ -182,10 +211,11 @@ def caustics():
 
 
 def light_scene(name, add_light):
-    """A diffuse plane with a small occluder under one light."""
+    """An 8 m diffuse plane (Diffuse BSDF) with a small block floating 0.25 m
+    above it, lit by whatever ``add_light`` adds."""
     reset(name)
     plane(8, mat=shader("Floor", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8, 1)), name="Floor")
-    cube(0.5, (0.4, 0.3, 0.5), principled("Block", (0.8, 0.3, 0.2), roughness=1.0)).name = "Block"
+    cube(0.5, (0.4, 0.3, 0.5), principled("Block", (0.8, 0.3, 0.2), roughness=1.0), name="Block")
     add_light()
     camera((0, -5.5, 4.0), (0, 0, 0.3), lens=40)
 
@@ -195,8 +225,8 @@ def light_point():
 
 
 def light_spot():
-    light_scene("light_spot", lambda: light("SPOT", (-0.5, -0.8, 3.0), 800.0, rotation=(0.3, -0.2, 0),
-                                           spot_size=math.radians(50), spot_blend=0.25, shadow_soft_size=0.1))
+    light_scene("light_spot", lambda: light("SPOT", (-0.5, -0.8, 3.0), 1000.0, rotation=(0.3, -0.2, 0),
+                                           spot_size=math.radians(90), spot_blend=0.25, shadow_soft_size=0.1))
 
 
 def light_sun():
@@ -209,10 +239,7 @@ def light_area():
 
 
 def light_world():
-    def sky():
-        set_world(bpy.context.scene, (0.6, 0.7, 0.9), 1.0)
-
-    light_scene("light_world", sky)
+    light_scene("light_world", lambda: set_world(bpy.context.scene, (0.6, 0.7, 0.9), 0.7))
 
 
 def light_emission():
@@ -224,7 +251,8 @@ def light_emission():
 
 
 def large_scene():
-    """Over 100k triangles: a subdivided Suzanne instanced through a collection."""
+    """Over 100k triangles kept small on disk: a Suzanne with an unapplied
+    Subdivision Surface modifier, instanced nine times through a collection."""
     reset("large_scene")
     plane(30, mat=principled("Ground", (0.5, 0.5, 0.5), roughness=1.0), name="Ground")
     source = bpy.data.collections.new("Suzanne Source")
@@ -234,6 +262,7 @@ def large_scene():
     modifier = monkey.modifiers.new("Subdivision", "SUBSURF")
     modifier.levels = modifier.render_levels = 2
     assign(monkey, principled("Suzanne", (0.8, 0.55, 0.3), roughness=0.6))
+    # the source lives only in its (unlinked) collection; the scene sees the instances
     for coll in list(monkey.users_collection):
         coll.objects.unlink(monkey)
     source.objects.link(monkey)
@@ -245,8 +274,8 @@ def large_scene():
             inst.location = (2.2 * (i - 1), 2.2 * (j - 1), 0.8)
             inst.rotation_euler = (0, 0, 0.4 * (i + j))
             bpy.context.scene.collection.objects.link(inst)
-    light("SUN", (0, 0, 10), 4.0, rotation=(0.6, 0.2, 0.5), angle=math.radians(2))
-    set_world(bpy.context.scene, (0.4, 0.5, 0.7), 0.5)
+    light("SUN", (0, 0, 10), 2.5, rotation=(0.6, 0.2, 0.5), angle=math.radians(2))
+    set_world(bpy.context.scene, (0.4, 0.5, 0.7), 0.4)
     camera((0, -8.5, 6.0), (0, 0, 0.4), lens=35)
 
 
@@ -264,17 +293,42 @@ SCENES = {
 }
 
 
+# -- command line -------------------------------------------------------------------
+
+
+def evaluated_triangles() -> int:
+    """Triangles of every mesh instance after modifiers, as a renderer sees them."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    return sum(len(inst.object.data.loop_triangles) for inst in depsgraph.object_instances
+               if inst.object.type == "MESH")
+
+
+def relative_paths_only():
+    """Point the render output and the file browsers at the .blend's own
+    folder, so the saved file holds no absolute folder of this computer."""
+    bpy.context.scene.render.filepath = "//"
+    for screen in bpy.data.screens:
+        for area in screen.areas:
+            for space in area.spaces:
+                if space.type == "FILE_BROWSER" and space.params is not None:
+                    space.params.directory = b"//"
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument("--out", default=HERE, help="folder for the .blend files")
-    parser.add_argument("--only", nargs="*", default=None, help="scene names to build")
+    parser.add_argument("--only", nargs="*", default=None, choices=sorted(SCENES), metavar="NAME",
+                        help="scene names to build (default: all)")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
+    bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups beside the scenes
     for name in args.only or SCENES:
         SCENES[name]()
+        triangles = evaluated_triangles()
+        relative_paths_only()
         path = os.path.join(args.out, f"{name}.blend")
         bpy.ops.wm.save_as_mainfile(filepath=path, compress=True)
-        print(f"{path}  {os.path.getsize(path) / 1024:.0f} KiB")
+        print(f"{name + '.blend':22s} {os.path.getsize(path) / 1024:6.0f} KiB {triangles:8d} triangles")
 
 
 if __name__ == "__main__":

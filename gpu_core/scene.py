@@ -178,6 +178,7 @@ class ValidationReport:
     repaired_material_ids: int = 0
     repaired_normals: int = 0
     dropped_lights: int = 0
+    repaired_materials: int = 0
     messages: list[str] = field(default_factory=list)
 
     def as_stats(self) -> dict:
@@ -187,6 +188,7 @@ class ValidationReport:
             "repaired_material_ids": self.repaired_material_ids,
             "repaired_normals": self.repaired_normals,
             "dropped_lights": self.dropped_lights,
+            "repaired_materials": self.repaired_materials,
         }
 
 
@@ -246,10 +248,12 @@ def validate(scene: Scene) -> Scene:
     with np.errstate(invalid="ignore", over="ignore"):
         cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
         area2 = np.linalg.norm(cross, axis=1)
-        extent = np.abs(tris).max(axis=(1, 2)) + 1e-30
-        # zero area relative to the triangle's own scale and position
-        degenerate = finite & ~(area2 > 1e-12 * np.square(
-            np.maximum(np.ptp(tris, axis=1).max(axis=1), 1e-7 * extent)))
+        longest = np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2).max(axis=1)
+        extent = np.abs(tris).max(axis=(1, 2))
+        # zero area: a sliver thinner than 1e-12 of its length, or a cross
+        # product no larger than the rounding of coordinates this far out
+        noise = 64.0 * np.finfo(np.float64).eps * extent * longest
+        degenerate = finite & ~(area2 > np.maximum(1e-12 * np.square(longest), noise))
     report.dropped_degenerate_triangles = int(degenerate.sum())
     keep = finite & ~degenerate
     tris, normals, uvs, mat_ids, cross = tris[keep], normals[keep], uvs[keep], mat_ids[keep], cross[keep]
@@ -262,19 +266,25 @@ def validate(scene: Scene) -> Scene:
         mat_ids = np.where(bad_ids, len(materials) - 1, mat_ids).astype(np.int32)
 
     face_n = (cross / np.linalg.norm(cross, axis=1, keepdims=True)).astype(np.float32)
-    length = np.linalg.norm(normals, axis=2)
-    bad_normals = ~(np.isfinite(normals).all(axis=2) & (length > 1e-12))
+    normals64 = normals.astype(np.float64)  # float32 squares overflow above ~1e19
+    with np.errstate(invalid="ignore", over="ignore"):
+        length = np.linalg.norm(normals64, axis=2)
+    bad_normals = ~(np.isfinite(normals64).all(axis=2) & (length > 1e-12))
     report.repaired_normals = int(bad_normals.any(axis=1).sum())
-    normals = np.where(bad_normals[..., None], face_n[:, None, :], normals / np.where(bad_normals, 1.0, length)[..., None])
+    with np.errstate(invalid="ignore"):
+        normals = np.where(bad_normals[..., None], face_n[:, None, :], normals64 / np.where(bad_normals, 1.0, length)[..., None])
     uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
 
+    materials, repaired = _finite_materials(materials)
+    report.repaired_materials = len(repaired)
+    if repaired:
+        warnings.append(f"material(s) with NaN/Inf or negative values repaired with defaults: {', '.join(repaired)}")
+
     lights = scene.lights
-    good = (
-        np.isfinite(lights.power).all(axis=1)
-        & (lights.power >= 0).all(axis=1)
-        & np.isfinite(lights.position).all(axis=1)
-        & np.isfinite(lights.direction).all(axis=1)
-    )
+    good = np.isfinite(lights.power).all(axis=1) & (lights.power >= 0).all(axis=1)
+    for name in ("position", "direction", "axis_u", "axis_v", "radius", "spot_angle", "spot_blend", "sun_angle"):
+        values = getattr(lights, name)
+        good &= np.isfinite(values).all(axis=tuple(range(1, values.ndim)))
     report.dropped_lights = int((~good).sum())
     if report.dropped_lights:
         names = [nm for nm, g in zip(lights.names, good) if not g]
@@ -321,12 +331,36 @@ def _shaped(array, shape, dtype) -> np.ndarray:
     return out
 
 
+_MATERIAL_FIELDS = "base_color metallic roughness transmission ior emission alpha texture_id".split()
+
+
+def _finite_materials(materials: Materials) -> tuple[Materials, list[str]]:
+    """Materials with NaN/Inf values set to the defaults and negative emission to 0,
+    and the names of the rows that changed (the input itself if none did)."""
+    default = Materials.make([{}])
+    columns, changed = {}, np.zeros(len(materials), bool)
+    for name in _MATERIAL_FIELDS:
+        values = np.asarray(getattr(materials, name))
+        bad = ~np.isfinite(values) if values.dtype.kind == "f" else np.zeros(values.shape, bool)
+        if name == "emission":
+            bad |= np.isfinite(values) & (values < 0)
+            fixed = np.where(bad, 0.0, values).astype(values.dtype)
+        else:
+            fixed = np.where(bad, getattr(default, name)[0], values).astype(values.dtype)
+        changed |= bad.reshape(len(values), -1).any(axis=1)
+        columns[name] = fixed
+    if not changed.any():
+        return materials, []
+    names = [materials.names[i] if i < len(materials.names) and materials.names[i] else f"#{i}" for i in np.nonzero(changed)[0]]
+    return Materials(**columns, names=list(materials.names)), names
+
+
 def _with_default_material(materials: Materials) -> Materials:
     default = Materials.make([{"name": "gpugi-default"}])
     return Materials(
         **{
             name: np.concatenate([getattr(materials, name), getattr(default, name)])
-            for name in "base_color metallic roughness transmission ior emission alpha texture_id".split()
+            for name in _MATERIAL_FIELDS
         },
         names=list(materials.names) + default.names,
     )
