@@ -13,8 +13,9 @@ bl_info = {
 import os
 import sys
 
-# gpu_core lives beside this package in the source tree
-_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# gpu_core lives beside this package in the source tree (also when Blender
+# loads the add-on through a link to this folder)
+_ROOT = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
 if _ROOT not in sys.path:
     sys.path.append(_ROOT)
 
@@ -38,6 +39,7 @@ def register():
 
 
 def unregister():
+    """Remove panels, engine and settings (a second call does nothing)."""
     global _registered
     if not _registered:
         return

@@ -1,6 +1,10 @@
 """Command line: render a .blend with GPU GI through the bpy module.
 
     python -m blender_addon render FILE.blend -o OUT.png|OUT.exr [--frame N]
+        [--samples N] [--resolution-percentage P] [--device SPEC]
+
+Prints the image's path and each stage's time; on an error, prints one line
+and exits non-zero.
 """
 
 from __future__ import annotations
@@ -9,41 +13,71 @@ import argparse
 import os
 import sys
 
+# output extension -> Blender file format
 FORMATS = {".png": "PNG", ".exr": "OPEN_EXR", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}
 
 
+class CliError(Exception):
+    """A one-line message for the user; the command exits with status 1."""
+
+
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog="python -m blender_addon", description=__doc__.strip().splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m blender_addon", description="Render .blend files with GPU GI.")
     sub = parser.add_subparsers(dest="command", required=True)
-    render = sub.add_parser("render", help="render one frame of a .blend file")
+    render = sub.add_parser("render", help="render one frame of a .blend file to an image")
     render.add_argument("blend", help=".blend file to render")
-    render.add_argument("-o", "--output", required=True, help="image to write (.png, .exr, .jpg, .tif)")
+    render.add_argument("-o", "--output", required=True, help="image to write: " + ", ".join(FORMATS))
     render.add_argument("--frame", type=int, default=None, help="frame to render (default: the file's current frame)")
-    render.add_argument("--samples", type=int, default=None, help="camera paths per pixel")
-    render.add_argument("--resolution-percentage", type=int, default=None, help="scale of the file's resolution")
-    render.add_argument("--device", default=None, help="OpenCL device spec (see README)")
+    render.add_argument("--samples", type=_positive, default=None, help="camera paths per pixel")
+    render.add_argument("--resolution-percentage", type=_positive, default=None, help="scale of the file's resolution")
+    render.add_argument("--device", default=None, help="OpenCL device: 'cpu', 'gpu', a platform name part or 'P:D'")
     return parser.parse_args(argv)
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text} is not a positive integer")
+    return value
 
 
 def main(argv=None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        stats, warnings, output = render_file(args)
+    except CliError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    from .final import format_stage_times
+
+    for warning in warnings:
+        print(f"warning: {warning}")
+    print(f"device: {stats.get('device', 'unknown')}")
+    print(f"stages: {format_stage_times(stats.get('ms', {}))}")
+    print(f"image: {output}")
+    return 0
+
+
+def render_file(args) -> tuple[dict, list[str], str]:
+    """Render ``args.blend`` to ``args.output``; returns (stats, warnings, output path)."""
     blend = os.path.abspath(args.blend)
     output = os.path.abspath(args.output)
     ext = os.path.splitext(output)[1].lower()
     if ext not in FORMATS:
-        print(f"error: unsupported output extension {ext!r}; use one of {', '.join(FORMATS)}", file=sys.stderr)
-        return 2
+        raise CliError(f"unsupported output extension '{ext}'; use one of {', '.join(FORMATS)}")
     if not os.path.isfile(blend):
-        print(f"error: {blend} does not exist", file=sys.stderr)
-        return 2
+        raise CliError(f"{args.blend} does not exist")
 
     import bpy
 
     from . import register
-    from .final import LAST_RUN, format_stage_times
+    from .final import LAST_RUN
 
     register()
-    bpy.ops.wm.open_mainfile(filepath=blend)
+    try:
+        bpy.ops.wm.open_mainfile(filepath=blend)
+    except RuntimeError as err:
+        raise CliError(f"cannot open {args.blend}: {_first_line(err)}") from err
     scene = bpy.context.scene
     scene.render.engine = "GPUGI"
     if args.frame is not None:
@@ -54,24 +88,32 @@ def main(argv=None) -> int:
         scene.render.resolution_percentage = args.resolution_percentage
     if args.device is not None:
         scene.gpugi.device = args.device
-    settings = scene.render.image_settings
+    _set_output(scene.render, output, ext)
+    os.makedirs(os.path.dirname(output), exist_ok=True)
+    try:
+        bpy.ops.render.render(write_still=True)
+    except RuntimeError as err:
+        raise CliError(LAST_RUN.get("error") or _first_line(err)) from err
+    if LAST_RUN.get("error"):
+        raise CliError(LAST_RUN["error"])
+    if not os.path.isfile(output):
+        raise CliError(f"no image was written to {args.output}")
+    return LAST_RUN.get("stats", {}), LAST_RUN.get("warnings", []), output
+
+
+def _set_output(render, output: str, ext: str) -> None:
+    """Write a single image of the extension's format (EXR as 32-bit float) to ``output``."""
+    settings = render.image_settings
+    if hasattr(settings, "media_type"):
+        settings.media_type = "IMAGE"
     settings.file_format = FORMATS[ext]
     if ext == ".exr":
         settings.color_depth = "32"
-    scene.render.use_file_extension = False
-    scene.render.filepath = output
-    os.makedirs(os.path.dirname(output), exist_ok=True)
-    bpy.ops.render.render(write_still=True)
-    if LAST_RUN.get("error"):
-        print(f"error: {LAST_RUN['error']}", file=sys.stderr)
-        return 1
-    if not os.path.isfile(output):
-        print(f"error: no image was written to {output}", file=sys.stderr)
-        return 1
-    stats = LAST_RUN.get("stats", {})
-    for warning in LAST_RUN.get("warnings", []):
-        print(f"warning: {warning}")
-    print(f"device: {stats.get('device', '?')}")
-    print(f"stages: {format_stage_times(stats.get('ms', {}))}")
-    print(f"wrote {output}")
-    return 0
+        settings.color_mode = "RGBA"
+    render.use_file_extension = False
+    render.filepath = output
+
+
+def _first_line(err: Exception) -> str:
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__

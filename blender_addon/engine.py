@@ -1,32 +1,42 @@
-"""The RenderEngine Blender calls for F12, `blender -b`, previews and the viewport."""
+"""The RenderEngine Blender calls for F12, `blender -b`, previews and the viewport.
+
+It stays thin: final renders go through final.py, the Rendered viewport
+through a ViewportSession (viewport.py) and a ViewportDrawer (display.py).
+"""
 
 from __future__ import annotations
 
 import bpy
 
-from .display import draw_pixels, prepare_pixels
+from gpu_core.errors import GpuGiError
+
+from .display import ViewportDrawer
+from .export import export_scene
 from .final import render_final
-from .viewport import ViewportSession
+from .viewport import Job, ViewportSession, view_state
 
 
 class GpuGiRenderEngine(bpy.types.RenderEngine):
     bl_idname = "GPUGI"
     bl_label = "GPU GI"
     bl_use_preview = True
-    bl_use_shading_nodes_custom = False
+    bl_use_shading_nodes_custom = False  # users keep Cycles' shader nodes (Principled BSDF)
     bl_use_postprocess = True
-    bl_use_eevee_viewport = True  # Material Preview mode stays EEVEE
+    bl_use_eevee_viewport = True  # Material Preview shading stays EEVEE
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._viewport: ViewportSession | None = None
+        self._drawer = ViewportDrawer()
+        self._reported_error: str | None = None
 
     def __del__(self):
         try:
-            if self._viewport is not None:
-                self._viewport.stop()
+            session = self._viewport
         except (ReferenceError, AttributeError):
-            pass  # the engine struct is already gone
+            return  # the struct is gone: the worker stops at its next redraw request
+        if session is not None:
+            session.stop()
 
     # -- final render -----------------------------------------------------------
 
@@ -43,23 +53,44 @@ class GpuGiRenderEngine(bpy.types.RenderEngine):
     # -- viewport ---------------------------------------------------------------
 
     def view_update(self, context, depsgraph):
-        if self._viewport is None:
-            self._viewport = ViewportSession(self.tag_redraw)
+        """An edit (or the first draw): export on this (main) thread, render in the worker."""
         try:
-            self._viewport.update_scene(depsgraph, context)
+            if self._viewport is None:
+                self._viewport = ViewportSession(self.tag_redraw)
+            scene = depsgraph.scene
+            view = view_state(context)
+            job = Job(
+                scene=export_scene(depsgraph, camera=view.camera),
+                settings=scene.gpugi.render_settings(preview=True, transparent=scene.render.film_transparent),
+                device_spec=scene.gpugi.device or None,
+                pixel_size=self.get_preview_pixel_size(scene),
+            )
+            self._viewport.update_scene(job, view.signature)
         except Exception as err:  # never a traceback in the viewport
-            self.report({"ERROR"}, f"GPU GI: {err}")
+            self._report_viewport_error(err)
 
     def view_draw(self, context, depsgraph):
+        """Follow view changes and draw the newest image; cheap by design."""
         session = self._viewport
         if session is None:
             return
-        session.update_view(context)
-        if session.error:
-            self.report({"ERROR"}, f"GPU GI: {session.error}")
-            session.error = None
-        image = session.latest()
-        if image is None:
-            return
-        region = context.region
-        draw_pixels(self, depsgraph.scene, prepare_pixels(image, region.width, region.height))
+        try:
+            session.update_view(view_state(context))
+            image, version = session.latest()
+            if image is not None:
+                region = context.region
+                self._drawer.draw(self, depsgraph.scene, image, version, region.width, region.height)
+            self.update_stats("", session.status)
+            if session.error and session.error != self._reported_error:
+                self._reported_error = session.error
+                self.report({"ERROR"}, f"GPU GI: {session.error}")
+        except Exception as err:
+            self._report_viewport_error(err)
+
+    def _report_viewport_error(self, err: Exception) -> None:
+        if isinstance(err, GpuGiError):
+            message = str(err)
+        else:
+            message = f"internal error ({type(err).__name__}): {err}"
+        self.update_stats("", f"GPU GI | error: {message}")
+        self.report({"ERROR"}, f"GPU GI: {message}")

@@ -1,4 +1,8 @@
-"""F12, animation frames, `blender -b` and material previews: one full render."""
+"""F12, animation frames, `blender -b` and material previews: one full render.
+
+Export on Blender's render thread, render with gpu_core in batches (Esc is
+polled between them), then write the passes into Blender's render result.
+"""
 
 from __future__ import annotations
 
@@ -10,49 +14,98 @@ from gpu_core.device import get_device
 from gpu_core.errors import GpuGiError, RenderCancelled
 from gpu_core.renderer import Renderer
 
-from .export import ExportError, export_scene
+from .export import export_scene
 
-# What the last final render did, for the command line and tests.
+# What the last final render in this process did: the command line and the
+# tests read it ("stats", "warnings", "passes", "error", "cancelled").
 LAST_RUN: dict = {}
 
 
 def render_final(engine, depsgraph) -> None:
-    """Export, render on the device and write the passes; errors are reported."""
-    scene = depsgraph.scene
+    """Export, render on the device and write the passes; errors are reported, never raised."""
     LAST_RUN.clear()
-    settings = scene.gpugi.render_settings(preview=engine.is_preview, transparent=scene.render.film_transparent)
-    started = time.perf_counter()
+    scene = depsgraph.scene
     try:
-        engine.update_stats("", "GPU GI: exporting scene")
-        gscene = export_scene(depsgraph, should_stop=engine.test_break)
-        export_ms = (time.perf_counter() - started) * 1e3
-        device = get_device(scene.gpugi.device or None)
-        if engine.test_break():
-            raise RenderCancelled("render cancelled")
-
-        def progress(fraction: float, message: str) -> None:
-            engine.update_progress(fraction)
-            engine.update_stats("", f"GPU GI: {message}")
-
-        result = Renderer(device).render(gscene, settings, progress=progress, should_stop=engine.test_break)
+        result = _render(engine, depsgraph)
+        written = write_passes(engine, result.passes, depsgraph.view_layer)
     except RenderCancelled:
         LAST_RUN["cancelled"] = True
+        engine.update_stats("", "GPU GI | cancelled")
         return
-    except (GpuGiError, ExportError) as err:
+    except GpuGiError as err:
         _fail(engine, str(err))
         return
-    except Exception as err:  # never let a traceback reach Blender's render job
+    except Exception as err:  # a traceback must never reach Blender's render job
         _fail(engine, f"internal error ({type(err).__name__}): {err}")
         return
-    result.stats["ms"] = {"export": export_ms, **result.stats["ms"]}
-    _write_passes(engine, result.passes)
-    for warning in result.warnings:
-        engine.report({"WARNING"}, f"GPU GI: {warning}")
-    LAST_RUN.update(stats=result.stats, warnings=result.warnings)
-    engine.update_stats("", "GPU GI: " + format_stage_times(result.stats["ms"]))
+    if not engine.is_preview:
+        for warning in result.warnings:
+            engine.report({"WARNING"}, f"GPU GI: {warning}")
+    LAST_RUN.update(stats=result.stats, warnings=result.warnings, passes=written, scene=scene.name)
+    engine.update_memory_stats(memory_used=result.stats.get("device_bytes", 0) / 2**20)
+    engine.update_stats("", "GPU GI | " + format_stage_times(result.stats["ms"]))
+
+
+def _render(engine, depsgraph):
+    """Export and render; the result's stats get the export and device stages."""
+    scene = depsgraph.scene
+    settings = scene.gpugi.render_settings(preview=engine.is_preview, transparent=scene.render.film_transparent)
+    engine.update_stats("", "GPU GI | exporting scene")
+    started = time.perf_counter()
+    gscene = export_scene(depsgraph, camera_object=engine.camera_override, should_stop=engine.test_break)
+    export_ms = (time.perf_counter() - started) * 1e3
+    if engine.test_break():
+        raise RenderCancelled("render cancelled")
+    engine.update_stats("", "GPU GI | opening the OpenCL device")
+    started = time.perf_counter()
+    device = get_device(scene.gpugi.device or None)
+    device_ms = (time.perf_counter() - started) * 1e3
+
+    def progress(fraction: float, message: str) -> None:
+        engine.update_progress(fraction)
+        engine.update_stats("", f"GPU GI | {message}")
+
+    result = Renderer(device).render(gscene, settings, progress=progress, should_stop=engine.test_break)
+    result.stats["ms"] = {"export": export_ms, "device": device_ms, **result.stats["ms"]}
+    return result
+
+
+def write_passes(engine, passes: dict, view_layer) -> list[str]:
+    """Write the passes the view layer has enabled; returns the names written.
+
+    The result window is the render border (or the whole image), which is
+    also the size of every pass gpu_core returns.
+    """
+    combined = passes["Combined"]
+    height, width = combined.shape[:2]
+    wanted = {"Combined": True, "Depth": view_layer.use_pass_z, "Normal": view_layer.use_pass_normal}
+    written = []
+    complete = False
+    result = engine.begin_result(0, 0, width, height, layer=view_layer.name)
+    try:
+        if (result.resolution_x, result.resolution_y) != (width, height):
+            raise GpuGiError(
+                f"the render result is {result.resolution_x}x{result.resolution_y} pixels "
+                f"but the image is {width}x{height}; the border window was computed differently"
+            )
+        layer = result.layers[0]
+        for name, pixels in passes.items():
+            target = layer.passes.find_by_name(name, "") if wanted.get(name) else None
+            if target is None:
+                continue
+            flat = np.ascontiguousarray(pixels, np.float32).reshape(height * width, -1)
+            if flat.shape[1] != target.channels:
+                raise GpuGiError(f"pass {name} has {flat.shape[1]} channels, Blender expects {target.channels}")
+            target.rect.foreach_set(flat.ravel())
+            written.append(name)
+        complete = True
+    finally:
+        engine.end_result(result, cancel=not complete)
+    return written
 
 
 def format_stage_times(ms: dict) -> str:
+    """'export 3 ms, kdtree 25 ms, ...' in the order the stages ran."""
     return ", ".join(f"{name} {value:.0f} ms" for name, value in ms.items())
 
 
@@ -60,21 +113,3 @@ def _fail(engine, message: str) -> None:
     LAST_RUN["error"] = message
     engine.report({"ERROR"}, f"GPU GI: {message}")
     engine.error_set(f"GPU GI: {message}")
-
-
-def _write_passes(engine, passes: dict) -> None:
-    combined = passes["Combined"]
-    height, width = combined.shape[:2]
-    result = engine.begin_result(0, 0, width, height)
-    try:
-        layer = result.layers[0]
-        for name, pixels in passes.items():
-            target = layer.passes.find_by_name(name, "")
-            if target is None:
-                continue
-            flat = np.ascontiguousarray(pixels, np.float32).reshape(height * width, -1)
-            if flat.shape[1] != target.channels:
-                continue
-            target.rect.foreach_set(flat.ravel())
-    finally:
-        engine.end_result(result)

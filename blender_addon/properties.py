@@ -25,15 +25,24 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
     max_bounces: bpy.props.IntProperty(
         name="Specular Bounces", description="Mirror and glass bounces followed from the camera", default=8, min=0, max=64
     )
+    diffuse_bounces: bpy.props.IntProperty(
+        name="Diffuse Bounces",
+        description="Diffuse bounces path-traced after the first diffuse hit (0 = direct light only)",
+        default=RenderSettings.diffuse_bounces,
+        min=0,
+        max=64,
+    )
     clamp: bpy.props.FloatProperty(
         name="Clamp", description="Largest radiance of one sample (0 disables clamping)", default=0.0, min=0.0
     )
     seed: bpy.props.IntProperty(name="Seed", description="Noise pattern", default=0, min=0)
 
     def render_settings(self, preview: bool = False, transparent: bool = False) -> RenderSettings:
+        """gpu_core settings for a final render, or for the viewport/previews."""
         return RenderSettings(
             samples=self.preview_samples if preview else self.samples,
             max_bounces=self.max_bounces,
+            diffuse_bounces=self.diffuse_bounces,
             clamp=self.clamp,
             seed=self.seed,
             transparent_background=transparent,

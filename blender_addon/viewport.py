@@ -1,129 +1,178 @@
-"""Rendered viewport: export on the main thread, render in a worker, draw the latest.
+"""Rendered viewport: the scene is exported on the main thread, a worker
+thread renders it, view_draw shows the latest image.
 
-The worker renders coarse first (a quarter of the resolution, one sample),
-then the full region; an edit or a view change restarts it.
+The worker renders a coarse image first (a quarter of the resolution, one
+sample), then the full one; an edit or a view change stops it between two
+kernel batches and starts it again. Nothing here touches Blender data: the
+engine passes exported scenes, cameras and settings in.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import threading
+from typing import Callable
 
 import numpy as np
 
-from gpu_core.device import get_device
 from gpu_core.errors import GpuGiError, RenderCancelled
-from gpu_core.renderer import Renderer
 
-from .export import ExportError, export_scene
 from .export.camera import view_camera
 
 COARSE_FACTOR = 4
 
 
-def view_signature(context) -> tuple:
-    """What identifies the current view: region size and view/projection matrices."""
+@dataclasses.dataclass(frozen=True)
+class ViewState:
+    """What the viewport shows from: its camera and a signature to compare."""
+
+    camera: object  # gpu_core Camera at the region's size
+    signature: tuple
+
+
+def view_state(context) -> ViewState:
+    """The camera and signature (region size, view and window matrices) of a 3D view."""
     region, rv3d = context.region, context.region_data
-    return (
-        region.width,
-        region.height,
-        tuple(tuple(row) for row in rv3d.view_matrix),
-        tuple(tuple(row) for row in rv3d.window_matrix),
-    )
+    view = np.array(rv3d.view_matrix, np.float64)
+    window = np.array(rv3d.window_matrix, np.float64)
+    camera = view_camera(view, window, region.width, region.height, ortho=not rv3d.is_perspective)
+    signature = (region.width, region.height, view.round(9).tobytes(), window.round(9).tobytes())
+    return ViewState(camera=camera, signature=signature)
 
 
-def camera_for_view(context):
-    """A gpu_core camera for the 3D view (camera view included)."""
-    region, rv3d, space = context.region, context.region_data, context.space_data
-    return view_camera(
-        rv3d.view_matrix,
-        rv3d.window_matrix,
-        region.width,
-        region.height,
-        ortho=not rv3d.is_perspective,
-        clip_start=space.clip_start,
-        clip_end=space.clip_end,
-    )
+def default_renderer(device_spec: str | None):
+    """A gpu_core Renderer on the device named by the spec."""
+    from gpu_core.device import get_device
+    from gpu_core.renderer import Renderer
+
+    return Renderer(get_device(device_spec))
+
+
+@dataclasses.dataclass
+class Job:
+    """One render request: the scene and how to render it."""
+
+    scene: object  # gpu_core Scene
+    settings: object  # gpu_core RenderSettings
+    device_spec: str | None
+    pixel_size: int = 1
 
 
 class ViewportSession:
-    """One viewport's scene, worker thread and latest image."""
+    """One viewport's worker thread and latest image.
 
-    def __init__(self, redraw):
+    ``redraw`` is called (from the worker) whenever a new image or error is
+    ready; ``make_renderer(device_spec)`` builds the renderer the worker uses.
+    """
+
+    def __init__(self, redraw: Callable[[], None], make_renderer=default_renderer):
         self._redraw = redraw
+        self._make_renderer = make_renderer
+        self._renderers: dict = {}
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self.scene = None
-        self.settings = None
-        self.device_spec = None
-        self.signature = None
-        self.image: np.ndarray | None = None
+        self.job: Job | None = None
+        self.signature: tuple | None = None
+        self._image: np.ndarray | None = None
+        self._version = 0
         self.error: str | None = None
+        self.status = ""
 
-    def update_scene(self, depsgraph, context) -> None:
-        """Re-export after an edit (main thread) and restart rendering."""
-        try:
-            scene = export_scene(depsgraph, camera=camera_for_view(context))
-        except ExportError as err:
-            self.error = str(err)
-            return
-        gpugi = depsgraph.scene.gpugi
-        self.settings = gpugi.render_settings(preview=True)
-        self.device_spec = gpugi.device or None
-        self.signature = view_signature(context)
-        self.restart(scene)
+    # -- main thread ----------------------------------------------------------
 
-    def update_view(self, context) -> bool:
-        """Follow a view change (main thread); True when a restart happened."""
-        signature = view_signature(context)
-        if self.scene is None or signature == self.signature:
-            return False
+    def update_scene(self, job: Job, signature: tuple) -> None:
+        """A new export (after an edit): render it from the start."""
         self.signature = signature
-        self.restart(dataclasses.replace(self.scene, camera=camera_for_view(context)))
+        self.restart(job)
+
+    def update_view(self, view: ViewState) -> bool:
+        """Follow a view change seen in view_draw; True when rendering restarted."""
+        if self.job is None or view.signature == self.signature:
+            return False
+        self.signature = view.signature
+        scene = dataclasses.replace(self.job.scene, camera=view.camera)
+        self.restart(dataclasses.replace(self.job, scene=scene))
         return True
 
-    def restart(self, scene) -> None:
+    def restart(self, job: Job) -> None:
+        """Stop the worker and start a new one on ``job``."""
         self.stop()
-        self.scene = scene
+        self.job = job
         self.error = None
+        self.status = "GPU GI | rendering"
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._work, args=(scene, self.settings, self._stop), daemon=True)
+        self._thread = threading.Thread(target=self._work, args=(job, self._stop), name="gpugi-viewport", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
+        """Ask the worker to stop after its current batch and wait for it."""
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=5.0)
+            self._thread.join(timeout=10.0)
         self._thread = None
 
-    def _work(self, scene, settings, stop: threading.Event) -> None:
+    def latest(self) -> tuple[np.ndarray | None, int]:
+        """The newest finished image (float RGBA, rows from the bottom) and its version."""
+        with self._lock:
+            return self._image, self._version
+
+    @property
+    def busy(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    # -- worker thread --------------------------------------------------------
+
+    def _work(self, job: Job, stop: threading.Event) -> None:
         try:
-            renderer = Renderer(get_device(self.device_spec))
-            for coarse in (True, False):
-                job_scene, job_settings = scene, settings
-                if coarse:
-                    job_scene = dataclasses.replace(scene, camera=_scaled_camera(scene.camera, COARSE_FACTOR))
-                    job_settings = dataclasses.replace(settings, samples=1)
-                result = renderer.render(job_scene, job_settings, should_stop=stop.is_set)
+            renderer = self._renderer(job.device_spec)
+            for factor, samples, label in self._passes(job):
+                if stop.is_set():
+                    return
+                scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, factor))
+                settings = dataclasses.replace(job.settings, samples=samples)
+                result = renderer.render(scene, settings, should_stop=stop.is_set)
+                if stop.is_set():
+                    return
                 with self._lock:
-                    self.image = result.passes["Combined"]
-                self._redraw()
+                    self._image = result.passes["Combined"]
+                    self._version += 1
+                self.status = f"GPU GI | {label}, {result.stats.get('triangles', 0)} triangles"
+                self._notify()
         except RenderCancelled:
             return
         except GpuGiError as err:
-            self.error = str(err)
-            self._redraw()
+            self._fail(str(err))
         except Exception as err:  # a worker must never take Blender down
-            self.error = f"internal error ({type(err).__name__}): {err}"
+            self._fail(f"internal error ({type(err).__name__}): {err}")
+
+    def _passes(self, job: Job):
+        """(resolution divisor, samples, label) of each image the worker renders."""
+        full = max(1, int(job.pixel_size))
+        yield COARSE_FACTOR * full, 1, "preview"
+        yield full, job.settings.samples, f"{job.settings.samples} samples"
+
+    def _renderer(self, device_spec):
+        if device_spec not in self._renderers:
+            self._renderers[device_spec] = self._make_renderer(device_spec)
+        return self._renderers[device_spec]
+
+    def _fail(self, message: str) -> None:
+        self.error = message
+        self.status = f"GPU GI | error: {message}"
+        self._notify()
+
+    def _notify(self) -> None:
+        try:
             self._redraw()
-
-    def latest(self) -> np.ndarray | None:
-        with self._lock:
-            return self.image
+        except ReferenceError:
+            self._stop.set()  # the engine is gone; nothing will draw this
 
 
-def _scaled_camera(camera, factor: int):
+def scaled_camera(camera, factor: int):
+    """``camera`` with its resolution divided by ``factor`` (same view, no border)."""
+    if factor <= 1 and camera.border is None:
+        return camera
     return dataclasses.replace(
         camera, width=max(1, camera.width // factor), height=max(1, camera.height // factor), border=None
     )

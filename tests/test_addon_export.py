@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from blender_addon.export import ExportError, export_scene
+from blender_addon.final import LAST_RUN
+from conftest import render_to_array
 from gpu_core.scene import AREA_ELLIPSE, AREA_RECTANGLE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN
 
 
@@ -266,3 +268,249 @@ def test_orthographic_camera_clipping_percentage_and_border(bpy):
 def test_missing_camera_is_a_clear_export_error(bpy_empty):
     with pytest.raises(ExportError, match="no active camera"):
         export_scene(bpy_empty.context.evaluated_depsgraph_get())
+
+
+def test_panoramic_camera_is_a_clear_export_error(bpy):
+    bpy.context.scene.camera.data.type = "PANO"
+    with pytest.raises(ExportError, match="panoramic"):
+        _export(bpy)
+
+
+def _face_normals(tris):
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def test_non_uniform_and_mirroring_scales_keep_normals_on_the_winding_side(bpy):
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1, location=(0, 0, 0))
+    sphere = bpy.context.object
+    bpy.ops.object.shade_flat()
+    for scale in ((1.0, 2.0, 0.5), (-1.0, 1.5, 1.0)):
+        sphere.scale = scale
+        scene = _export(bpy)
+        # flat shading: corner normals stay perpendicular to the transformed faces
+        # (inverse transpose) and on the side the winding points to (mirroring flips it)
+        dots = np.einsum("tcj,tj->tc", scene.normals, _face_normals(scene.triangles))
+        np.testing.assert_allclose(dots, 1.0, atol=1e-4)
+        outward = np.einsum("tj,tj->t", _face_normals(scene.triangles), scene.triangles.mean(axis=1))
+        assert (outward > 0).all(), scale
+
+
+def test_uvs_come_from_the_uv_map_marked_for_rendering(bpy):
+    bpy.ops.mesh.primitive_plane_add(size=2)
+    mesh = bpy.context.object.data
+    second = mesh.uv_layers.new(name="second")
+    coords = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers[0].uv.foreach_get("vector", coords)
+    second.uv.foreach_set("vector", coords * 0.25 + 0.5)
+    mesh.uv_layers.active = mesh.uv_layers[0]
+    second.active_render = True
+    uvs = _export(bpy).uvs
+    assert uvs.min() == pytest.approx(0.5) and uvs.max() == pytest.approx(0.75)
+
+
+def test_add_and_mix_shaders_sum_emission_and_keep_the_dominant_surface(bpy):
+    def plane_with(mat, x):
+        bpy.ops.mesh.primitive_plane_add(size=1, location=(x, 0, 0))
+        bpy.context.object.data.materials.append(mat)
+
+    def combine(name, kind, first, second, fac=None):
+        mat = bpy.data.materials.new(name)
+        tree = mat.node_tree
+        tree.nodes.clear()
+        out = tree.nodes.new("ShaderNodeOutputMaterial")
+        node = tree.nodes.new(kind)
+        shaders = [s for s in node.inputs if s.type == "SHADER"]
+        for socket, (shader, inputs) in zip(shaders, (first, second)):
+            source = tree.nodes.new(shader)
+            for key, value in inputs.items():
+                source.inputs[key].default_value = value
+            tree.links.new(source.outputs[0], socket)
+        if fac is not None:
+            node.inputs["Fac"].default_value = fac
+        tree.links.new(node.outputs[0], out.inputs["Surface"])
+        return mat
+
+    diffuse_red = ("ShaderNodeBsdfDiffuse", {"Color": (1, 0, 0, 1)})
+    emission = ("ShaderNodeEmission", {"Color": (1, 1, 1, 1), "Strength": 4.0})
+    glossy = ("ShaderNodeBsdfGlossy", {"Color": (1, 1, 1, 1)})
+    plane_with(combine("add", "ShaderNodeAddShader", emission, diffuse_red), 0)
+    plane_with(combine("mix_emit", "ShaderNodeMixShader", diffuse_red, emission, fac=0.25), 2)
+    plane_with(combine("mix_two", "ShaderNodeMixShader", diffuse_red, glossy, fac=0.8), 4)
+    scene = _export(bpy)
+    m = scene.materials
+    add, mix_emit, mix_two = (m.names.index(n) for n in ("add", "mix_emit", "mix_two"))
+    np.testing.assert_allclose(m.base_color[add], (1, 0, 0))
+    np.testing.assert_allclose(m.emission[add], (4, 4, 4))
+    np.testing.assert_allclose(m.base_color[mix_emit], (0.75, 0, 0))
+    np.testing.assert_allclose(m.emission[mix_emit], (1, 1, 1))
+    assert m.metallic[mix_two] == 1.0  # the glossy side weighs 0.8
+    assert any("mix_two" in w and "larger weight" in w for w in scene.warnings)
+
+
+def test_non_color_and_float_images_stay_linear(bpy):
+    values = [0.5, 0.25, 0.125, 1.0]
+    non_color = bpy.data.images.new("data", 1, 1)
+    non_color.colorspace_settings.name = "Non-Color"
+    non_color.pixels = values
+    floating = bpy.data.images.new("hdr", 1, 1, float_buffer=True)
+    floating.pixels = values
+    for x, image in ((0, non_color), (2, floating)):
+        bpy.ops.mesh.primitive_plane_add(size=1, location=(x, 0, 0))
+        mat, node = _material(bpy, "ShaderNodeBsdfDiffuse")
+        tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Color"])
+        bpy.context.object.data.materials.append(mat)
+    scene = _export(bpy)
+    assert len(scene.textures) == 2
+    for pixels in scene.textures:
+        np.testing.assert_allclose(pixels[0, 0], values, atol=1.0 / 255)
+
+
+def test_light_power_follows_exposure_temperature_and_normalize(bpy):
+    point = _light(bpy, "POINT", energy=10, exposure=2.0, color=(1, 1, 1))
+    warm = _light(bpy, "POINT", energy=10, use_temperature=True, temperature=3000.0, color=(1, 1, 1))
+    area = _light(bpy, "AREA", energy=10, shape="RECTANGLE", size=2.0, size_y=0.5, normalize=False)
+    area.scale = (2.0, 1.0, 1.0)
+    disk = _light(bpy, "AREA", energy=10, shape="DISK", size=2.0, normalize=False)
+    sphere = _light(bpy, "POINT", energy=10, shadow_soft_size=0.5, normalize=False)
+    lights = _export(bpy).lights
+    power = dict(zip(lights.names, lights.power))
+    np.testing.assert_allclose(power[point.data.name], (40, 40, 40), rtol=1e-6)
+    np.testing.assert_allclose(power[warm.data.name], 10 * np.array(warm.data.temperature_color[:3]), rtol=1e-6)
+    assert power[warm.data.name][0] > power[warm.data.name][2]  # 3000 K is reddish
+    # without Normalize the strength is per unit area: the power grows with the (scaled) area
+    np.testing.assert_allclose(power[area.data.name], 10 * (2.0 * 2.0) * 0.5, rtol=1e-6)
+    np.testing.assert_allclose(power[disk.data.name], 10 * math.pi / 4 * 4.0, rtol=1e-6)
+    np.testing.assert_allclose(power[sphere.data.name], 10 * 4 * math.pi * 0.25, rtol=1e-6)
+
+
+def test_portal_lights_are_skipped_and_unsupported_light_settings_warn(bpy):
+    portal = _light(bpy, "AREA", energy=10)
+    portal.data.cycles.is_portal = True
+    spread = _light(bpy, "AREA", energy=10, spread=0.5)
+    _light(bpy, "POINT", energy=10, use_shadow=False)
+    scene = _export(bpy)
+    assert portal.data.name not in scene.lights.names
+    assert len(scene.lights) == 2
+    assert any(spread.data.name in w and "spread" in w for w in scene.warnings)
+    assert any("shadows" in w for w in scene.warnings)
+
+
+def test_unsupported_objects_and_world_nodes_warn_but_export(bpy):
+    cloud = bpy.data.objects.new("cloud", bpy.data.pointclouds.new("cloud"))
+    bpy.context.scene.collection.objects.link(cloud)
+    world = bpy.data.worlds.new("sky")
+    bpy.context.scene.world = world
+    sky = world.node_tree.nodes.new("ShaderNodeTexSky")
+    world.node_tree.links.new(sky.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    scene = _export(bpy)
+    assert scene.triangle_count == 2
+    assert any("POINTCLOUD" in w for w in scene.warnings)
+    assert any("ShaderNodeTexSky" in w for w in scene.warnings)
+    assert np.isfinite(scene.world_color).all()
+
+
+def test_instancer_hidden_in_renders_is_not_exported(bpy, tmp_path):
+    bpy.ops.mesh.primitive_plane_add(size=2)
+    parent = bpy.context.object
+    bpy.ops.mesh.primitive_cube_add(size=0.2)
+    cube = bpy.context.object
+    cube.parent = parent
+    parent.instance_type = "VERTS"
+    parent.show_instancer_for_render = parent.show_instancer_for_viewport = False
+    # the viewport shows the child itself too; renders hide it (Blender's rule)
+    assert _export(bpy).triangle_count == 4 * 12 + 12
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    scene.gpugi.samples = 1
+    render_to_array(bpy, scene, "GPUGI", str(tmp_path / "verts.exr"))
+    assert LAST_RUN["stats"]["triangles"] == 4 * 12  # a cube on each of the plane's 4 vertices
+
+
+def _window_from_projection_matrix(projection, ortho):
+    """Unproject the NDC corners with the inverse projection (independent of the exporter)."""
+    inv = np.linalg.inv(np.asarray(projection, np.float64))
+    corners = []
+    for x, y in ((-1, -1), (1, 1)):
+        p = inv @ np.array([x, y, 0.5, 1.0])
+        p = p[:3] / p[3]
+        corners.append(p[:2] if ortho else p[:2] / -p[2])
+    (x0, y0), (x1, y1) = corners
+    return (x0, x1, y0, y1)
+
+
+@pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
+@pytest.mark.parametrize("fit,size,shift", [("AUTO", (64, 32), (0.1, 0.0)), ("VERTICAL", (40, 60), (-0.2, 0.15)),
+                                            ("HORIZONTAL", (30, 50), (0.0, -0.3))])
+def test_camera_window_matches_blenders_projection_matrix(bpy, kind, fit, size, shift):
+    scene = bpy.context.scene
+    cam_obj = scene.camera
+    cam = cam_obj.data
+    cam.type, cam.sensor_fit, cam.lens, cam.ortho_scale = kind, fit, 35.0, 3.0
+    cam.shift_x, cam.shift_y = shift
+    render = scene.render
+    render.resolution_x, render.resolution_y, render.resolution_percentage = *size, 100
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    projection = cam_obj.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=size[0], y=size[1])
+    camera = export_scene(depsgraph).camera
+    expected = _window_from_projection_matrix(projection, kind == "ORTHO")
+    np.testing.assert_allclose(camera.window, expected, rtol=1e-5, atol=1e-6)
+    # the window keeps the image's aspect
+    x0, x1, y0, y1 = camera.window
+    assert (x1 - x0) / (y1 - y0) == pytest.approx(size[0] / size[1], rel=1e-5)
+
+
+def _user_data_snapshot(bpy):
+    """Names in every bpy.data collection, mesh coordinates and material values."""
+    snap = {}
+    for attr in dir(bpy.data):
+        collection = getattr(bpy.data, attr, None)
+        if isinstance(collection, bpy.types.bpy_prop_collection) and attr != "window_managers":
+            snap[attr] = sorted(item.name for item in collection)
+    for mesh in bpy.data.meshes:
+        coords = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", coords)
+        snap["mesh:" + mesh.name] = (coords.tobytes(), len(mesh.loop_triangles), len(mesh.uv_layers))
+    for mat in bpy.data.materials:
+        snap["mat:" + mat.name] = [
+            tuple(s.default_value) if hasattr(s.default_value, "__len__") else s.default_value
+            for n in mat.node_tree.nodes for s in n.inputs if hasattr(s, "default_value")
+        ]
+    for obj in bpy.data.objects:
+        snap["obj:" + obj.name] = (tuple(map(tuple, obj.matrix_world)), len(obj.modifiers), obj.hide_render)
+    return snap
+
+
+def test_exporter_leaves_the_users_data_unchanged(bpy):
+    bpy.ops.mesh.primitive_cube_add(size=2)
+    cube = bpy.context.object
+    cube.modifiers.new("sub", "SUBSURF").levels = 1
+    image = bpy.data.images.new("tex", 2, 2)
+    mat, node = _material(bpy, "ShaderNodeBsdfPrincipled")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
+    cube.data.materials.append(mat)
+    _light(bpy, "AREA", energy=10)
+    bpy.context.scene.world = bpy.data.worlds.new("w")
+    bpy.context.view_layer.update()  # evaluate first: matrix_world is then up to date
+    before = _user_data_snapshot(bpy)
+    for _ in range(2):
+        _export(bpy)
+    assert _user_data_snapshot(bpy) == before
+
+
+def test_ray_visibility_and_holdout_settings_warn(bpy):
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    hidden = bpy.context.object
+    hidden.visible_shadow = False
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(2, 0, 0))
+    bpy.context.object.is_holdout = True
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(4, 0, 0))
+    scene = _export(bpy)
+    assert scene.triangle_count == 6
+    assert any(hidden.name in w and "shadow" in w for w in scene.warnings)
+    assert sum("holdout" in w for w in scene.warnings) == 1

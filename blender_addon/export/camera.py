@@ -4,55 +4,76 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpu_core.errors import GpuGiError
 from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Camera
 
 
-def window_from_projection(projection, ortho: bool) -> tuple[float, float, float, float]:
-    """Image rectangle (x0, x1, y0, y1) in camera space from a projection matrix:
-    on the plane z = -1 for perspective, in scene units for orthographic."""
-    p = np.asarray(projection, np.float64)
-    if ortho:
-        sx, ox, sy, oy = p[0, 0], p[0, 3], p[1, 1], p[1, 3]
-    else:
-        # x_ndc = (P00 x + P02 z) / -z: at z = -1, x = (x_ndc + P02) / P00
-        sx, ox, sy, oy = p[0, 0], -p[0, 2], p[1, 1], -p[1, 2]
-    return ((-1 - ox) / sx, (1 - ox) / sx, (-1 - oy) / sy, (1 - oy) / sy)
+class CameraError(GpuGiError):
+    """The camera cannot be rendered by this engine; the message says why."""
 
 
 def render_size(render) -> tuple[int, int]:
-    """Image size in pixels after the resolution percentage."""
-    scale = render.resolution_percentage / 100.0
-    return max(1, int(render.resolution_x * scale)), max(1, int(render.resolution_y * scale))
+    """Image size in pixels after the resolution percentage, as Blender computes it."""
+    percentage = int(render.resolution_percentage)
+    return (
+        max(1, int(render.resolution_x) * percentage // 100),
+        max(1, int(render.resolution_y) * percentage // 100),
+    )
 
 
-def border_pixels(render, width: int, height: int):
-    """Pixel window (x0, y0, x1, y1) of the render border, or None."""
+def border_pixels(render, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """Pixel window (x0, y0, x1, y1) of the render border, or None without one.
+
+    Blender multiplies the float border by the size and truncates, in single
+    precision; the render result it allocates has exactly that size.
+    """
     if not render.use_border:
         return None
-    x0 = int(round(render.border_min_x * width))
-    x1 = int(round(render.border_max_x * width))
-    y0 = int(round(render.border_min_y * height))
-    y1 = int(round(render.border_max_y * height))
+    f32 = np.float32
+    x0 = int(f32(render.border_min_x) * f32(width))
+    x1 = int(f32(render.border_max_x) * f32(width))
+    y0 = int(f32(render.border_min_y) * f32(height))
+    y1 = int(f32(render.border_max_y) * f32(height))
     x0, y0 = min(max(x0, 0), width - 1), min(max(y0, 0), height - 1)
     x1, y1 = max(min(x1, width), x0 + 1), max(min(y1, height), y0 + 1)
+    if (x0, y0, x1, y1) == (0, 0, width, height):
+        return None
     return (x0, y0, x1, y1)
 
 
-def scene_camera(depsgraph, camera_obj) -> Camera:
-    """The scene camera at the render resolution, with border and clipping."""
-    scene = depsgraph.scene
+def window_from_frame(frame, ortho: bool) -> tuple[float, float, float, float]:
+    """Image rectangle (x0, x1, y0, y1) from Blender's camera frame corners:
+    on the plane z = -1 for perspective, in scene units for orthographic."""
+    corners = np.array([tuple(v) for v in frame], np.float64)
+    if not ortho:
+        corners = corners[:, :2] / -corners[:, 2:3]
+    return (
+        float(corners[:, 0].min()),
+        float(corners[:, 0].max()),
+        float(corners[:, 1].min()),
+        float(corners[:, 1].max()),
+    )
+
+
+def scene_camera(scene, camera_obj, warnings: list[str]) -> Camera:
+    """The scene camera at the render resolution, with border and clipping.
+
+    The window comes from Blender's own camera frame, so sensor fit, lens
+    shift and pixel aspect are applied exactly as Blender applies them.
+    """
     render = scene.render
-    width, height = render_size(render)
     data = camera_obj.data
-    projection = camera_obj.calc_matrix_camera(depsgraph, x=width, y=height,
-                                               scale_x=render.pixel_aspect_x, scale_y=render.pixel_aspect_y)
-    ortho = data.type == "ORTHO"
     if data.type == "PANO":
-        raise ValueError("panoramic cameras are not supported; switch the camera to Perspective or Orthographic")
-    matrix = np.asarray(camera_obj.matrix_world, np.float64)
+        raise CameraError("panoramic cameras are not supported; switch the camera to Perspective or Orthographic")
+    if data.dof.use_dof:
+        warnings.append("camera depth of field is not supported; rendered in focus")
+    if render.use_motion_blur:
+        warnings.append("motion blur is not supported; rendered without it")
+    width, height = render_size(render)
+    ortho = data.type == "ORTHO"
     return Camera(
-        matrix=matrix,
-        window=window_from_projection(projection, ortho),
+        matrix=np.array(camera_obj.matrix_world, np.float64),
+        window=window_from_frame(data.view_frame(scene=scene), ortho),
         width=width,
         height=height,
         kind=CAMERA_ORTHO if ortho else CAMERA_PERSP,
@@ -62,15 +83,48 @@ def scene_camera(depsgraph, camera_obj) -> Camera:
     )
 
 
-def view_camera(view_matrix, projection, width: int, height: int, ortho: bool, clip_start: float, clip_end: float) -> Camera:
-    """A camera from a 3D viewport's view and projection matrices."""
+def window_from_projection(projection, ortho: bool) -> tuple[float, float, float, float]:
+    """Image rectangle (x0, x1, y0, y1) of an OpenGL-style projection matrix,
+    on the plane z = -1 for perspective, in view units for orthographic."""
+    p = np.asarray(projection, np.float64)
+    if not (np.isfinite(p).all() and abs(p[0, 0]) > 0 and abs(p[1, 1]) > 0):
+        raise CameraError("the view's projection is degenerate (zero-size view?)")
+    if ortho:
+        # x_ndc = P00 x + P03
+        sx, ox, sy, oy = p[0, 0], p[0, 3], p[1, 1], p[1, 3]
+    else:
+        # at z = -1: x_ndc = P00 x - P02
+        sx, ox, sy, oy = p[0, 0], -p[0, 2], p[1, 1], -p[1, 2]
+    return ((-1 - ox) / sx, (1 - ox) / sx, (-1 - oy) / sy, (1 - oy) / sy)
+
+
+def clip_from_projection(projection, ortho: bool) -> tuple[float, float]:
+    """(near, far) distances along the view axis of a projection matrix."""
+    p = np.asarray(projection, np.float64)
+    a, b = p[2, 2], p[2, 3]
+    if ortho:
+        return (b + 1.0) / a, (b - 1.0) / a
+    return b / (a - 1.0), b / (a + 1.0)
+
+
+def view_camera(view_matrix, projection, width: int, height: int, ortho: bool) -> Camera:
+    """A camera for a 3D viewport from its view and projection matrices.
+
+    An orthographic view clips from behind its own origin; the camera is
+    moved back so that its clipping range starts at zero.
+    """
     matrix = np.linalg.inv(np.asarray(view_matrix, np.float64))
+    near, far = clip_from_projection(projection, ortho)
+    if ortho and near < 0.0:
+        back = matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+        matrix[:3, 3] += back * -near
+        near, far = 0.0, far - near
     return Camera(
         matrix=matrix,
         window=window_from_projection(projection, ortho),
-        width=max(1, width),
-        height=max(1, height),
+        width=max(1, int(width)),
+        height=max(1, int(height)),
         kind=CAMERA_ORTHO if ortho else CAMERA_PERSP,
-        clip_start=clip_start,
-        clip_end=clip_end,
+        clip_start=max(float(near), 0.0),
+        clip_end=float(far),
     )

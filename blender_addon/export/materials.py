@@ -1,30 +1,41 @@
 """Blender materials (Cycles node trees) to gpu_core material rows.
 
-Supported: Principled BSDF, Diffuse, Glossy, Glass and Emission shaders
-(also inside an Add/Mix Shader, where the first supported input wins) and
-an Image Texture on Base Color / Color. Anything else falls back to a
-default and is named in the warnings.
+Supported: Principled BSDF (Base Color, Metallic, Roughness, Transmission
+Weight, IOR, Emission Color x Strength, Alpha), Diffuse, Glossy, Glass and
+Emission shaders, Add and Mix Shader over them (emission is summed, the
+surface is the dominant shader), and an Image Texture on Base Color or
+Color. Anything else falls back to a default value and is named in the
+warnings; nothing here raises on an unexpected node tree.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-DEFAULT_ROW = {"base_color": (0.8, 0.8, 0.8), "roughness": 0.5, "name": "default"}
+DEFAULT_ROW = {"base_color": (0.8, 0.8, 0.8), "roughness": 0.5}
+BLACK = (0.0, 0.0, 0.0)
+_GLOSSY = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
+_SRGB_SPACES = ("sRGB", "sRGB EOTF")
+# Principled layers the renderer has no model for, with the input that switches them on
+_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"))
 
 
 class MaterialTable:
     """Material rows and textures, one row per distinct Blender material."""
 
     def __init__(self):
-        self.rows: list[dict] = [dict(DEFAULT_ROW)]
+        self.rows: list[dict] = [{**DEFAULT_ROW, "name": "default"}]
         self.textures: list[np.ndarray] = []
         self.warnings: list[str] = []
         self._index: dict = {None: 0}
         self._images: dict = {}
 
     def index(self, material) -> int:
-        """Row of ``material`` (None = the default row), exported on first use."""
+        """Row of ``material`` (None = the default row), exported on first use.
+
+        The evaluated material is read (animated values at the render's
+        frame), keyed by the datablock it was evaluated from.
+        """
         key = material.original.name_full if material is not None else None
         if key not in self._index:
             self._index[key] = len(self.rows)
@@ -35,74 +46,139 @@ class MaterialTable:
         if message not in self.warnings:
             self.warnings.append(message)
 
-    def _export(self, material) -> dict:
-        mat = material.original
-        row = {"name": mat.name}
-        if not mat.use_nodes or mat.node_tree is None:
-            row["base_color"] = tuple(mat.diffuse_color[:3])
-            row["metallic"] = float(mat.metallic)
-            row["roughness"] = float(mat.roughness)
-            return row
+    # -- node tree ------------------------------------------------------------
+
+    def _export(self, mat) -> dict:
+        """The row of one material: its surface shader, or its viewport colours."""
+        if mat.node_tree is None:
+            return {
+                "name": mat.name,
+                "base_color": tuple(mat.diffuse_color[:3]),
+                "metallic": float(mat.metallic),
+                "roughness": float(mat.roughness),
+            }
         output = _output_node(mat.node_tree)
-        if output is None or not output.inputs["Surface"].is_linked:
-            self._warn(f"material '{mat.name}': no surface output; used the default material")
+        source = _linked_node(output.inputs["Surface"]) if output is not None else None
+        if source is None:
+            self._warn(f"material '{mat.name}': nothing is connected to the Surface output; used the default material")
             return {**DEFAULT_ROW, "name": mat.name}
-        shader = output.inputs["Surface"].links[0].from_node
-        return {**row, **self._shader(mat.name, shader)}
+        row = self._shader(mat.name, source)
+        row.pop("emission_only", None)
+        return {**row, "name": mat.name}
 
     def _shader(self, name: str, node) -> dict:
+        """Row fields of the shader ``node`` outputs."""
         kind = node.bl_idname
         if kind == "ShaderNodeBsdfPrincipled":
-            row = {
-                **self._color(name, node.inputs["Base Color"]),
-                "metallic": _value(node.inputs["Metallic"]),
-                "roughness": _value(node.inputs["Roughness"]),
-                "transmission": _value(node.inputs["Transmission Weight"]),
-                "ior": _value(node.inputs["IOR"]),
-                "alpha": _value(node.inputs["Alpha"]),
-            }
-            strength = _value(node.inputs["Emission Strength"])
-            emission = np.asarray(_color_value(node.inputs["Emission Color"])) * strength
-            row["emission"] = tuple(float(c) for c in emission)
-            return row
+            return self._principled(name, node)
         if kind == "ShaderNodeBsdfDiffuse":
             return {**self._color(name, node.inputs["Color"]), "roughness": 1.0}
-        if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
-            return {**self._color(name, node.inputs["Color"]), "metallic": 1.0,
-                    "roughness": _value(node.inputs["Roughness"])}
+        if kind in _GLOSSY:
+            return {
+                **self._color(name, node.inputs["Color"]),
+                "metallic": 1.0,
+                "roughness": self._value(name, node.inputs["Roughness"]),
+            }
         if kind == "ShaderNodeBsdfGlass":
-            return {**self._color(name, node.inputs["Color"]), "transmission": 1.0,
-                    "roughness": _value(node.inputs["Roughness"]), "ior": _value(node.inputs["IOR"])}
+            return {
+                **self._color(name, node.inputs["Color"]),
+                "transmission": 1.0,
+                "roughness": self._value(name, node.inputs["Roughness"]),
+                "ior": self._value(name, node.inputs["IOR"]),
+            }
         if kind == "ShaderNodeEmission":
-            color = np.asarray(_color_value(node.inputs["Color"])) * _value(node.inputs["Strength"])
-            return {"base_color": (0.0, 0.0, 0.0), "emission": tuple(float(c) for c in color)}
-        if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
-            for socket in node.inputs:
-                if socket.type == "SHADER" and socket.is_linked:
-                    self._warn(f"material '{name}': {node.name} reduced to its first shader")
-                    return self._shader(name, socket.links[0].from_node)
+            color = np.array(self._color_value(name, node.inputs["Color"])) * self._value(name, node.inputs["Strength"])
+            return {"base_color": BLACK, "emission": tuple(float(c) for c in color), "emission_only": True}
+        if kind in ("ShaderNodeAddShader", "ShaderNodeMixShader"):
+            return self._combine(name, node)
         self._warn(f"material '{name}': shader node '{node.bl_idname}' is not supported; used the default material")
-        return {k: v for k, v in DEFAULT_ROW.items() if k != "name"}
+        return dict(DEFAULT_ROW)
+
+    def _principled(self, name: str, node) -> dict:
+        inputs = node.inputs
+        emission = np.array(self._color_value(name, inputs["Emission Color"])) * self._value(name, inputs["Emission Strength"])
+        for socket_name, layer in _PRINCIPLED_UNSUPPORTED:
+            socket = inputs.get(socket_name)
+            if socket is not None and (socket.is_linked or socket.default_value > 0.0):
+                self._warn(f"material '{name}': the Principled BSDF {layer} layer is not supported; left out")
+        return {
+            **self._color(name, inputs["Base Color"]),
+            "metallic": self._value(name, inputs["Metallic"]),
+            "roughness": self._value(name, inputs["Roughness"]),
+            "transmission": self._value(name, inputs["Transmission Weight"]),
+            "ior": self._value(name, inputs["IOR"]),
+            "alpha": self._value(name, inputs["Alpha"]),
+            "emission": tuple(float(c) for c in emission),
+        }
+
+    def _combine(self, name: str, node) -> dict:
+        """Add/Mix Shader: emission is added (weighted by the mix factor),
+        the surface is that of the shader with the larger weight."""
+        shaders = [s for s in node.inputs if s.type == "SHADER"]
+        weights = [1.0, 1.0]
+        if node.bl_idname == "ShaderNodeMixShader":
+            fac = float(np.clip(self._value(name, node.inputs["Fac"]), 0.0, 1.0))
+            weights = [1.0 - fac, fac]
+        rows = []
+        for socket, weight in zip(shaders, weights):
+            source = _linked_node(socket)
+            if source is not None and weight > 0.0:
+                rows.append((weight, self._shader(name, source)))
+        if not rows:
+            return {"base_color": BLACK, "emission_only": True}
+        emission = sum(np.array(row.get("emission", BLACK)) * weight for weight, row in rows)
+        surfaces = [(weight, row) for weight, row in rows if not row.get("emission_only")]
+        if not surfaces:
+            row = {"base_color": BLACK, "emission_only": True}
+        elif len(surfaces) == 1:
+            # one surface mixed with emission or nothing: it reflects its share
+            weight, row = surfaces[0]
+            row = {**row, "base_color": tuple(float(c) * min(weight, 1.0) for c in row["base_color"])}
+        else:
+            self._warn(f"material '{name}': {node.name} mixes two surfaces; used the one with the larger weight")
+            row = max(surfaces, key=lambda item: item[0])[1]
+        return {**row, "emission": tuple(float(c) for c in emission)}
+
+    # -- sockets --------------------------------------------------------------
 
     def _color(self, name: str, socket) -> dict:
-        """Row fields for a colour socket: an Image Texture link becomes the
-        row's texture (white base), anything else linked its default value."""
-        if socket.is_linked:
-            source = socket.links[0].from_node
-            if source.bl_idname == "ShaderNodeTexImage" and source.image is not None:
-                texture = self._texture(name, source.image)
-                if texture >= 0:
-                    return {"base_color": (1.0, 1.0, 1.0), "texture_id": texture}
-            else:
-                self._warn(f"material '{name}': '{source.bl_idname}' on {socket.name} is not supported; used its default value")
-        return {"base_color": tuple(_color_value(socket))}
+        """Row fields of a colour socket: an Image Texture on it becomes the
+        row's texture over a white base; any other link its default value."""
+        source = _linked_node(socket)
+        if source is not None and source.bl_idname == "ShaderNodeTexImage":
+            texture = self._texture(name, source)
+            if texture >= 0:
+                return {"base_color": (1.0, 1.0, 1.0), "texture_id": texture}
+            return {"base_color": tuple(float(c) for c in socket.default_value[:3])}
+        return {"base_color": tuple(self._color_value(name, socket))}
 
-    def _texture(self, name: str, image) -> int:
+    def _color_value(self, name: str, socket) -> list[float]:
+        if socket.is_linked:
+            self._warn_link(name, socket)
+        return [float(c) for c in socket.default_value[:3]]
+
+    def _value(self, name: str, socket) -> float:
+        if socket.is_linked:
+            self._warn_link(name, socket)
+        return float(socket.default_value)
+
+    def _warn_link(self, name: str, socket) -> None:
+        source = socket.links[0].from_node.bl_idname if socket.links else "a link"
+        self._warn(f"material '{name}': '{source}' on {socket.node.name} > {socket.name} is not supported; used its value")
+
+    def _texture(self, name: str, node) -> int:
+        """Index of the node's image in the texture list, -1 if it has no pixels."""
+        image = node.image.original if node.image is not None else None  # pixels live on the original
+        if image is None:
+            self._warn(f"material '{name}': {node.name} has no image; used the socket's colour")
+            return -1
+        if node.inputs["Vector"].is_linked:
+            self._warn(f"material '{name}': texture coordinates on {node.name} are not supported; used the UV map")
         key = image.name_full
         if key not in self._images:
             pixels = image_pixels(image)
             if pixels is None:
-                self._warn(f"material '{name}': image '{image.name}' has no pixels; ignored")
+                self._warn(f"material '{name}': image '{image.name}' has no pixels (missing file?); used the socket's colour")
                 return -1
             self._images[key] = len(self.textures)
             self.textures.append(pixels)
@@ -110,30 +186,52 @@ class MaterialTable:
 
 
 def image_pixels(image) -> np.ndarray | None:
-    """(H, W, 4) float32 linear pixels of a Blender image, or None."""
+    """(H, W, 4) float32 linear pixels of a Blender image, or None without pixels.
+
+    Byte images in an sRGB colour space are converted to linear; float images
+    are already linear in Blender.
+    """
     width, height = image.size
-    if width == 0 or height == 0:
+    channels = image.channels
+    if width == 0 or height == 0 or channels == 0:
         return None
-    buf = np.empty(width * height * 4, np.float32)
-    image.pixels.foreach_get(buf)
-    pixels = buf.reshape(height, width, 4)
-    if not image.is_float and image.colorspace_settings.name in ("sRGB", "sRGB EOTF"):
+    buf = np.empty(width * height * channels, np.float32)
+    try:
+        image.pixels.foreach_get(buf)
+    except (RuntimeError, ValueError):
+        return None
+    pixels = buf.reshape(height, width, channels)
+    if channels != 4:
+        rgba = np.ones((height, width, 4), np.float32)
+        rgba[..., :3] = pixels[..., :1] if channels < 3 else pixels[..., :3]
+        if channels == 2:
+            rgba[..., 3] = pixels[..., 1]
+        pixels = rgba
+    if not image.is_float and image.colorspace_settings.name in _SRGB_SPACES:
         rgb = pixels[..., :3]
         pixels[..., :3] = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
     return pixels
 
 
 def _output_node(tree):
-    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    """The active Material Output node used by Cycles, if any."""
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.target in ("ALL", "CYCLES")]
     for node in outputs:
-        if node.is_active_output and node.target in ("ALL", "CYCLES"):
+        if node.is_active_output:
             return node
     return outputs[0] if outputs else None
 
 
-def _value(socket) -> float:
-    return float(socket.default_value)
-
-
-def _color_value(socket) -> list:
-    return [float(c) for c in socket.default_value[:3]]
+def _linked_node(socket):
+    """The node feeding ``socket``, through reroutes and muted links; None if unlinked."""
+    seen = 0
+    while socket.is_linked and seen < 64:
+        link = socket.links[0]
+        if link.is_muted or not link.is_valid:
+            return None
+        node = link.from_node
+        if node.bl_idname != "NodeReroute":
+            return None if node.mute else node
+        socket = node.inputs[0]
+        seen += 1
+    return None

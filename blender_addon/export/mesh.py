@@ -1,29 +1,50 @@
-"""Evaluated meshes of every object instance into world-space triangle arrays."""
+"""Evaluated meshes of every object instance into world-space triangle arrays.
+
+All per-element data moves through ``foreach_get`` into numpy; no Python loop
+runs over vertices, corners or triangles.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 
 
+@dataclass
+class LocalMesh:
+    """One evaluated mesh in object space, triangulated."""
+
+    positions: np.ndarray  # (T, 3, 3) float32
+    normals: np.ndarray  # (T, 3, 3) float32 corner normals
+    uvs: np.ndarray  # (T, 3, 2) float32 of the UV map used for rendering
+    slots: np.ndarray  # (T,) int32 material slot of each triangle
+    materials: list  # the mesh's own materials, by slot
+
+
 class MeshCache:
-    """Per-mesh local arrays, exported once however often the mesh is instanced."""
+    """Local meshes, each exported once however often it is instanced."""
 
     def __init__(self):
-        self._arrays: dict = {}
+        self._meshes: dict = {}
 
-    def local_arrays(self, obj):
-        """(positions (T,3,3), normals (T,3,3), uvs (T,3,2), slot ids (T,)) in object space."""
-        data = getattr(obj, "data", None)
+    def local_mesh(self, obj) -> LocalMesh | None:
+        """The triangulated evaluated mesh of ``obj``, or None if it has no faces."""
+        data = obj.data
         key = (obj.name_full, data.as_pointer() if data is not None else 0)
-        if key not in self._arrays:
-            self._arrays[key] = _mesh_arrays(obj)
-        return self._arrays[key]
+        if key not in self._meshes:
+            self._meshes[key] = _triangulate(obj)
+        return self._meshes[key]
 
 
-def _mesh_arrays(obj):
-    mesh = obj.to_mesh()
+def _triangulate(obj) -> LocalMesh | None:
+    """Read the evaluated mesh of ``obj``; the temporary mesh is always freed."""
+    try:
+        mesh = obj.to_mesh()
+    except RuntimeError:
+        return None
     try:
         if mesh is None:
             return None
@@ -33,44 +54,56 @@ def _mesh_arrays(obj):
             return None
         verts = np.empty(len(mesh.vertices) * 3, np.float32)
         mesh.vertices.foreach_get("co", verts)
-        verts = verts.reshape(-1, 3)
         tri_verts = np.empty(count * 3, np.int32)
         mesh.loop_triangles.foreach_get("vertices", tri_verts)
         tri_loops = np.empty(count * 3, np.int32)
         mesh.loop_triangles.foreach_get("loops", tri_loops)
         slots = np.empty(count, np.int32)
         mesh.loop_triangles.foreach_get("material_index", slots)
-        # corner normals carry flat, smooth, sharp-edge and custom normals alike
+        # corner normals carry flat faces, smooth faces, sharp edges and custom normals alike
         corner = np.empty(len(mesh.loops) * 3, np.float32)
         mesh.corner_normals.foreach_get("vector", corner)
-        normals = corner.reshape(-1, 3)[tri_loops].reshape(count, 3, 3)
-        uv_layer = mesh.uv_layers.active
+        uv_layer = _render_uv_layer(mesh)
         if uv_layer is not None:
             uv = np.empty(len(mesh.loops) * 2, np.float32)
             uv_layer.uv.foreach_get("vector", uv)
             uvs = uv.reshape(-1, 2)[tri_loops].reshape(count, 3, 2)
         else:
             uvs = np.zeros((count, 3, 2), np.float32)
-        positions = verts[tri_verts].reshape(count, 3, 3)
-        materials = [m for m in mesh.materials]
-        return positions, normals, uvs, slots, materials
+        return LocalMesh(
+            positions=verts.reshape(-1, 3)[tri_verts].reshape(count, 3, 3),
+            normals=corner.reshape(-1, 3)[tri_loops].reshape(count, 3, 3),
+            uvs=uvs,
+            slots=slots,
+            materials=list(mesh.materials),
+        )
     finally:
         obj.to_mesh_clear()
 
 
-def transform(positions, normals, uvs, matrix):
-    """World positions (float64), unit world normals and UVs of object-space arrays."""
+def _render_uv_layer(mesh):
+    """The UV map marked for rendering (the camera icon), else the active one."""
+    for layer in mesh.uv_layers:
+        if layer.active_render:
+            return layer
+    return mesh.uv_layers.active
+
+
+def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World positions (float64), unit world normals and UVs of a local mesh.
+
+    Normals use the inverse transpose; a mirroring matrix reverses each
+    triangle's corner order so that winding and normals stay consistent.
+    """
     m = np.asarray(matrix, np.float64)
     lin, offset = m[:3, :3], m[:3, 3]
-    world = positions.astype(np.float64) @ lin.T + offset
-    try:
-        normal_matrix = np.linalg.inv(lin).T
-    except np.linalg.LinAlgError:
-        normal_matrix = lin
-    n = normals.astype(np.float64) @ normal_matrix.T
+    world = local.positions.astype(np.float64) @ lin.T + offset
+    det = np.linalg.det(lin)
+    normal_matrix = np.linalg.inv(lin).T if abs(det) > 1e-300 else lin
+    n = local.normals.astype(np.float64) @ normal_matrix.T
     length = np.linalg.norm(n, axis=-1, keepdims=True)
     n = np.where(length > 0, n / np.where(length > 0, length, 1.0), 0.0)
-    if np.linalg.det(lin) < 0:
-        # a mirroring transform flips the winding: keep normals and winding consistent
+    uvs = local.uvs
+    if det < 0:
         world, n, uvs = world[:, ::-1], n[:, ::-1], uvs[:, ::-1]
     return world, n.astype(np.float32), np.ascontiguousarray(uvs)

@@ -4,24 +4,33 @@ from __future__ import annotations
 
 import numpy as np
 
+BLACK = np.zeros(3, np.float32)
+
 
 def world_radiance(world, warnings: list[str]) -> np.ndarray:
-    """RGB radiance of the world; unsupported links fall back to their default value."""
+    """RGB radiance of the world seen by escaped rays.
+
+    A Background shader's Color x Strength; a world without a node tree uses
+    its colour, as Cycles does. Anything linked into the Background falls
+    back to the socket's own value and is named in ``warnings``.
+    """
     if world is None:
-        return np.zeros(3, np.float32)
-    if not world.use_nodes or world.node_tree is None:
-        return np.asarray(world.color[:3], np.float32)
+        return BLACK.copy()
     tree = world.node_tree
-    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+    if tree is None:
+        return np.array(world.color[:3], np.float32)
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.target in ("ALL", "CYCLES")]
     output = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
-    if output is None or not output.inputs["Surface"].is_linked:
-        return np.zeros(3, np.float32)
-    node = output.inputs["Surface"].links[0].from_node
-    if node.bl_idname != "ShaderNodeBackground":
-        warnings.append(f"world: '{node.bl_idname}' is not supported; the world is black")
-        return np.zeros(3, np.float32)
-    color_socket = node.inputs["Color"]
-    if color_socket.is_linked:
-        warnings.append(f"world: '{color_socket.links[0].from_node.bl_idname}' on Color is not supported; used its default colour")
-    color = np.asarray(color_socket.default_value[:3], np.float32)
-    return color * np.float32(node.inputs["Strength"].default_value)
+    surface = output.inputs["Surface"] if output is not None else None
+    if surface is None or not surface.is_linked:
+        return BLACK.copy()
+    node = surface.links[0].from_node
+    if node.bl_idname not in ("ShaderNodeBackground", "ShaderNodeEmission"):
+        warnings.append(f"world: shader '{node.bl_idname}' is not supported; the world is black")
+        return BLACK.copy()
+    color, strength = node.inputs["Color"], node.inputs["Strength"]
+    for socket in (color, strength):
+        if socket.is_linked:
+            source = socket.links[0].from_node.bl_idname
+            warnings.append(f"world: '{source}' on Background > {socket.name} is not supported; used its value")
+    return np.array(color.default_value[:3], np.float32) * np.float32(strength.default_value)

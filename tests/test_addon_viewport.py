@@ -1,0 +1,361 @@
+"""Rendered viewport without a window: pixel preparation drawn with moderngl,
+the worker scheduler with a fake renderer, the view camera from fake contexts."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from blender_addon.display import DISPLAY_MAX, prepare_pixels
+from blender_addon.engine import GpuGiRenderEngine
+from blender_addon.viewport import COARSE_FACTOR, Job, ViewportSession, view_state
+from gpu_core.errors import DeviceError, RenderCancelled
+from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Lights
+from gpu_core.settings import RenderSettings
+from scenes_py import camera_looking_down, plane_scene
+
+# -- pixels ---------------------------------------------------------------------
+
+
+def test_prepare_pixels_clamps_and_removes_non_finite_values():
+    img = np.array([[[np.nan, np.inf, -np.inf, 2.0], [-1.0, 1e9, 0.5, 1.0]]], np.float32)
+    out = prepare_pixels(img, 2, 1)
+    np.testing.assert_array_equal(out, [[[0.0, DISPLAY_MAX, 0.0, 2.0], [0.0, DISPLAY_MAX, 0.5, 1.0]]])
+    assert out.dtype == np.float32 and out.flags["C_CONTIGUOUS"]
+
+
+def test_prepare_pixels_scales_a_coarse_image_by_nearest_neighbour_keeping_rows_bottom_up():
+    coarse = np.zeros((2, 3, 4), np.float32)
+    coarse[..., 0] = np.arange(6).reshape(2, 3)  # row 0 is the bottom row
+    out = prepare_pixels(coarse, 6, 4)
+    assert out.shape == (4, 6, 4)
+    np.testing.assert_array_equal(out[..., 0], np.repeat(np.repeat(coarse[..., 0], 2, axis=0), 2, axis=1))
+
+
+def test_prepare_pixels_rejects_images_without_four_channels():
+    with pytest.raises(ValueError):
+        prepare_pixels(np.zeros((4, 4, 3), np.float32), 4, 4)
+
+
+_VERTEX = """
+#version 330
+in vec2 pos;
+out vec2 uv;
+void main() { uv = pos * 0.5 + 0.5; gl_Position = vec4(pos, 0.0, 1.0); }
+"""
+_FRAGMENT = """
+#version 330
+uniform sampler2D image;
+in vec2 uv;
+out vec4 color;
+void main() { color = texture(image, uv); }
+"""
+
+
+def test_prepared_pixels_draw_unchanged_on_a_float_framebuffer():
+    moderngl = pytest.importorskip("moderngl")
+    ctx = moderngl.create_standalone_context(backend="egl")
+    try:
+        width, height = 24, 16
+        rng = np.random.default_rng(1)
+        coarse = (rng.random((height // 4, width // 4, 4)) * 3.0).astype(np.float32)
+        coarse[0, 0] = (1e6, np.nan, 0.25, 1.0)  # bottom-left: clamped and cleaned
+        pixels = prepare_pixels(coarse, width, height)
+        # the upload Blender's viewport does: a width x height RGBA32F texture, rows from the bottom
+        texture = ctx.texture((width, height), 4, pixels.tobytes(), dtype="f4")
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        target = ctx.framebuffer(color_attachments=[ctx.texture((width, height), 4, dtype="f4")])
+        program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
+        quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+        vao = ctx.vertex_array(program, [(quad, "2f", "pos")])
+        target.use()
+        texture.use(0)
+        vao.render(moderngl.TRIANGLE_STRIP)
+        drawn = np.frombuffer(target.read(components=4, dtype="f4"), np.float32).reshape(height, width, 4)
+    finally:
+        ctx.release()
+    np.testing.assert_array_equal(drawn, pixels)  # read back bottom row first, like the texture
+    np.testing.assert_array_equal(drawn[0, 0], (DISPLAY_MAX, 0.0, 0.25, 1.0))
+
+
+# -- view camera ------------------------------------------------------------------
+
+
+def _context(width, height, view, window, perspective=True):
+    return SimpleNamespace(
+        region=SimpleNamespace(width=width, height=height),
+        region_data=SimpleNamespace(view_matrix=view, window_matrix=window, is_perspective=perspective),
+    )
+
+
+def _perspective(fx, fy, near, far, shift=(0.0, 0.0)):
+    p = np.zeros((4, 4))
+    p[0, 0], p[1, 1], p[0, 2], p[1, 2] = fx, fy, shift[0], shift[1]
+    p[2, 2], p[2, 3], p[3, 2] = -(far + near) / (far - near), -2 * far * near / (far - near), -1.0
+    return p
+
+
+def _orthographic(sx, sy, near, far):
+    p = np.eye(4)
+    p[0, 0], p[1, 1] = sx, sy
+    p[2, 2], p[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+    return p
+
+
+def test_view_camera_from_a_perspective_viewport():
+    view = np.eye(4)
+    view[:3, 3] = (0.0, 0.0, -10.0)  # the eye at z = +10 looking down -Z
+    state = view_state(_context(80, 40, view, _perspective(2.0, 4.0, 0.1, 100.0, shift=(0.2, -0.4))))
+    cam = state.camera
+    assert cam.kind == CAMERA_PERSP and (cam.width, cam.height) == (80, 40)
+    np.testing.assert_allclose(cam.matrix[:3, 3], (0, 0, 10))
+    # at z = -1: x_ndc = 2 x - 0.2 and y_ndc = 4 y + 0.4
+    np.testing.assert_allclose(cam.window, (-0.4, 0.6, -0.35, 0.15), atol=1e-12)
+    assert (cam.clip_start, cam.clip_end) == pytest.approx((0.1, 100.0))
+
+
+def test_orthographic_viewport_that_clips_behind_its_eye_is_moved_back():
+    view = np.eye(4)
+    state = view_state(_context(50, 50, view, _orthographic(0.5, 0.5, -20.0, 20.0), perspective=False))
+    cam = state.camera
+    assert cam.kind == CAMERA_ORTHO
+    np.testing.assert_allclose(cam.window, (-2, 2, -2, 2))
+    np.testing.assert_allclose(cam.matrix[:3, 3], (0, 0, 20))  # moved back along +Z by the negative near
+    assert (cam.clip_start, cam.clip_end) == pytest.approx((0.0, 40.0))
+
+
+def test_view_signature_changes_with_region_size_and_matrices():
+    view, window = np.eye(4), _perspective(1.0, 1.0, 0.1, 10.0)
+    base = view_state(_context(10, 10, view, window)).signature
+    assert view_state(_context(10, 10, view.copy(), window.copy())).signature == base
+    assert view_state(_context(11, 10, view, window)).signature != base
+    moved = view.copy()
+    moved[0, 3] = 0.5
+    assert view_state(_context(10, 10, moved, window)).signature != base
+
+
+# -- worker scheduling --------------------------------------------------------------
+
+
+class FakeRenderer:
+    """Records each render; ``block`` makes a render wait until it is asked to stop."""
+
+    def __init__(self, block=False, error=None):
+        self.calls: list[tuple[int, int, int]] = []
+        self.block = block
+        self.error = error
+        self.started = threading.Event()
+
+    def render(self, scene, settings, progress=None, should_stop=None):
+        cam = scene.camera
+        self.calls.append((cam.width, cam.height, settings.samples))
+        self.started.set()
+        if self.error is not None:
+            raise self.error
+        while self.block:
+            if should_stop():
+                raise RenderCancelled("render cancelled")
+            time.sleep(0.005)
+        image = np.full((cam.height, cam.width, 4), float(len(self.calls)), np.float32)
+        return SimpleNamespace(passes={"Combined": image}, stats={"triangles": 2}, warnings=[])
+
+
+def _job(width=64, height=32, samples=8, pixel_size=1):
+    camera = dataclasses.replace(camera_looking_down(), width=width, height=height)
+    return Job(scene=plane_scene(Lights.make([]), camera), settings=RenderSettings(samples=samples),
+               device_spec=None, pixel_size=pixel_size)
+
+
+def _session(renderer):
+    redraws = []
+    session = ViewportSession(lambda: redraws.append(1), make_renderer=lambda spec: renderer)
+    return session, redraws
+
+
+def _wait(session):
+    deadline = time.time() + 10
+    while session.busy and time.time() < deadline:
+        time.sleep(0.005)
+    assert not session.busy
+
+
+def test_worker_renders_coarse_first_then_full_and_asks_for_redraws():
+    renderer = FakeRenderer()
+    session, redraws = _session(renderer)
+    session.update_scene(_job(samples=8), signature=("view", 1))
+    _wait(session)
+    assert renderer.calls == [(64 // COARSE_FACTOR, 32 // COARSE_FACTOR, 1), (64, 32, 8)]
+    image, version = session.latest()
+    assert image.shape == (32, 64, 4) and version == 2 and len(redraws) == 2
+    assert session.error is None
+
+
+def test_pixel_size_preference_divides_the_full_resolution():
+    renderer = FakeRenderer()
+    session, _ = _session(renderer)
+    session.update_scene(_job(pixel_size=2), signature=("view", 1))
+    _wait(session)
+    assert renderer.calls[-1][:2] == (32, 16)
+
+
+def test_same_view_does_not_restart_and_a_new_view_does():
+    renderer = FakeRenderer()
+    session, _ = _session(renderer)
+    session.update_scene(_job(), signature=("view", 1))
+    _wait(session)
+    same = SimpleNamespace(signature=("view", 1), camera=None)
+    assert session.update_view(same) is False
+    moved_cam = dataclasses.replace(session.job.scene.camera, width=40, height=20)
+    assert session.update_view(SimpleNamespace(signature=("view", 2), camera=moved_cam)) is True
+    _wait(session)
+    assert renderer.calls[-1] == (40, 20, 8)
+
+
+def test_an_edit_stops_the_running_render_between_batches():
+    renderer = FakeRenderer(block=True)
+    session, _ = _session(renderer)
+    session.update_scene(_job(), signature=("view", 1))
+    assert renderer.started.wait(5)
+    first_thread = session._thread
+    renderer.block = False
+    renderer.started.clear()
+    session.update_scene(_job(width=16, height=16), signature=("view", 2))
+    assert not first_thread.is_alive()
+    _wait(session)
+    assert renderer.calls[-1] == (16, 16, 8)
+    assert session.error is None
+
+
+def test_stop_ends_a_blocked_worker():
+    renderer = FakeRenderer(block=True)
+    session, _ = _session(renderer)
+    session.update_scene(_job(), signature=("view", 1))
+    assert renderer.started.wait(5)
+    session.stop()
+    assert not session.busy and session.latest()[0] is None
+
+
+def test_worker_errors_become_messages_not_exceptions():
+    renderer = FakeRenderer(error=DeviceError("no OpenCL device"))
+    session, redraws = _session(renderer)
+    session.update_scene(_job(), signature=("view", 1))
+    _wait(session)
+    assert session.error == "no OpenCL device" and "no OpenCL device" in session.status
+    assert redraws
+    broken = FakeRenderer(error=KeyError("x"))
+    session, _ = _session(broken)
+    session.update_scene(_job(), signature=("view", 1))
+    _wait(session)
+    assert session.error.startswith("internal error (KeyError)")
+
+
+def test_a_gone_engine_stops_the_worker_quietly():
+    def redraw():
+        raise ReferenceError("StructRNA of type GpuGiRenderEngine has been removed")
+
+    renderer = FakeRenderer()
+    session = ViewportSession(redraw, make_renderer=lambda spec: renderer)
+    session.update_scene(_job(), signature=("view", 1))
+    _wait(session)
+    assert len(renderer.calls) == 1  # the full pass never started
+    assert session.error is None
+
+
+# -- the engine's viewport callbacks, with a stand-in for Blender's engine struct ---------
+
+
+class RecordingDrawer:
+    """Takes the place of the gpu-module drawer (unavailable in background mode)."""
+
+    def __init__(self):
+        self.draws: list[tuple[np.ndarray, int, int, int]] = []
+
+    def draw(self, engine, scene, image, version, width, height):
+        self.draws.append((prepare_pixels(image, width, height), version, width, height))
+
+
+class StandInEngine:
+    """What view_update and view_draw use of the RenderEngine struct."""
+
+    _report_viewport_error = vars(GpuGiRenderEngine)["_report_viewport_error"]
+
+    def __init__(self):
+        self._viewport = None
+        self._drawer = RecordingDrawer()
+        self._reported_error = None
+        self.reports: list[tuple[set, str]] = []
+        self.stats: list[str] = []
+
+    def tag_redraw(self):
+        pass
+
+    def report(self, kind, message):
+        self.reports.append((kind, message))
+
+    def update_stats(self, stats, info):
+        self.stats.append(info)
+
+    def get_preview_pixel_size(self, scene):
+        return 1
+
+
+def _viewport_context(bpy, width, height, distance):
+    """A 3D view looking down at the origin from ``distance``."""
+    view = np.eye(4)
+    view[2, 3] = -distance
+    return _context(width, height, view, _perspective(1.5, 1.5 * width / height, 0.1, 100.0))
+
+
+def test_engine_viewport_callbacks_render_and_follow_the_view(bpy_empty):
+    bpy = bpy_empty
+    bpy.ops.mesh.primitive_plane_add(size=20)
+    bpy.ops.object.light_add(type="SUN")
+    bpy.context.scene.gpugi.preview_samples = 2
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view_update, view_draw = vars(GpuGiRenderEngine)["view_update"], vars(GpuGiRenderEngine)["view_draw"]
+    engine = StandInEngine()
+    near = _viewport_context(bpy, 32, 24, 5.0)
+
+    view_update(engine, near, depsgraph)
+    assert not engine.reports
+    _wait(engine._viewport)
+    view_draw(engine, near, depsgraph)
+    pixels, version, width, height = engine._drawer.draws[-1]
+    assert (width, height) == (32, 24) and pixels.shape == (24, 32, 4) and version == 2
+    assert np.isfinite(pixels).all() and pixels[..., :3].min() > 0  # the lit plane fills the view
+    assert engine.stats[-1].startswith("GPU GI | 2 samples")
+
+    # orbiting only calls view_draw: a new view restarts the worker with the new camera
+    far = _viewport_context(bpy, 40, 20, 50.0)
+    view_draw(engine, far, depsgraph)
+    _wait(engine._viewport)
+    view_draw(engine, far, depsgraph)
+    pixels, version, width, height = engine._drawer.draws[-1]
+    assert (width, height) == (40, 20) and version == 4
+    assert engine._viewport.job.scene.camera.width == 40
+    engine._viewport.stop()
+
+
+def test_engine_viewport_reports_errors_without_raising(bpy_empty):
+    bpy = bpy_empty
+    bpy.ops.mesh.primitive_plane_add()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view_update, view_draw = vars(GpuGiRenderEngine)["view_update"], vars(GpuGiRenderEngine)["view_draw"]
+    engine = StandInEngine()
+    # an error while exporting (a degenerate view) is reported at once
+    view_update(engine, _context(10, 10, np.eye(4), np.zeros((4, 4))), depsgraph)
+    assert engine.reports[-1] == ({"ERROR"}, "GPU GI: the view's projection is degenerate (zero-size view?)")
+    # an error in the worker (a camera clipping nothing) is reported by the next draw, once
+    clipped = _context(10, 10, np.eye(4), _perspective(1.0, 1.0, 5.0, 2.0))  # far in front of near
+    view_update(engine, clipped, depsgraph)
+    _wait(engine._viewport)
+    view_draw(engine, clipped, depsgraph)
+    view_draw(engine, clipped, depsgraph)
+    errors = [message for kind, message in engine.reports[1:] if kind == {"ERROR"}]
+    assert len(errors) == 1 and "clipping" in errors[0]
+    assert engine.stats[-1].startswith("GPU GI | error")
