@@ -1,8 +1,10 @@
-"""Triangle kd-tree: build, and closest/any-hit queries for tests and benchmarks.
+"""Triangle kd-tree: built on the device, and closest/any-hit queries.
 
-INTERIM: a host-side median-split build in the node layout of types.h, so the
-traversal kernels and the renderer can be written against the final API. The
-GPU builder of [ZHWG08] replaces ``_build_host`` behind the same ``build``.
+``build(device, triangles)`` runs the breadth-first builder of
+``kdtree_build.py``; the tree's arrays stay on the device and every tracing
+kernel takes them through ``KdTree.kernel_args()`` (``KDTREE_PARAMS`` in
+``kernels/types.h``). ``intersect`` and ``occluded`` run batches of rays
+for tests and benchmarks.
 """
 
 from __future__ import annotations
@@ -12,23 +14,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
+from pyopencl import cltypes
 
 from .device import Device
+from .errors import SceneError
+from .kdtree_build import LEAF, MAX_DEPTH, NODE_DTYPE, build_tree
 
-NODE_DTYPE = np.dtype([("split", np.float32), ("axis", np.int32), ("child", np.int32), ("count", np.int32)])
-LEAF = 3
-_LEAF_SIZE = 8
-_MAX_DEPTH = 30
+__all__ = ["KdTree", "build", "LEAF", "MAX_DEPTH", "NODE_DTYPE", "SELF_HIT_SCALE"]
+
+# Default lower end of a query ray, relative to the size of the coordinates
+# involved: hits closer than this to the origin are taken for the surface
+# the ray starts on.
+SELF_HIT_SCALE = 2.0**-18
+_FAR = np.float32(3.0e38)
 
 
 @dataclass
 class KdTree:
-    """Device buffers of a built tree and its statistics."""
+    """Device arrays of a built tree, its root box and its statistics."""
 
     device: Device
-    nodes: cl.Buffer
-    leaf_tris: cl.Buffer
-    verts: cl.Buffer
+    nodes: cla.Array
+    leaf_tris: cla.Array
+    verts: cla.Array
     bmin: np.ndarray  # (4,) float32
     bmax: np.ndarray  # (4,) float32
     triangle_count: int
@@ -36,131 +45,109 @@ class KdTree:
 
     def kernel_args(self) -> list:
         """Arguments matching KDTREE_PARAMS in kernels/types.h, in order."""
-        return [self.nodes, self.leaf_tris, self.verts, self.bmin, self.bmax]
+        return [self.nodes.data, self.leaf_tris.data, self.verts.data, self.bmin, self.bmax]
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray, t_max=None):
-        """Closest hits: ``(t, triangle_index)``, ``inf`` and ``-1`` on a miss."""
-        org, dirs, tmax = _rays(origins, directions, t_max)
+    @property
+    def magnitude(self) -> float:
+        """Largest absolute coordinate of the root box."""
+        return float(max(np.abs(self.bmin[:3]).max(), np.abs(self.bmax[:3]).max()))
+
+    def intersect(self, origins, directions, t_max=None, *, t_min=None, barycentrics=False):
+        """Closest hits: ``(t, triangle_index)``, ``inf`` and ``-1`` on a miss.
+
+        Hits count for ``t_min < t < t_max``; ``t_min`` defaults to a small
+        distance scaled to the coordinates, so a ray starting on a surface
+        does not hit it. With ``barycentrics``, also ``(N, 2)`` weights of
+        each hit triangle's second and third corners.
+        """
+        n, org, dirs, rng = self._rays(origins, directions, t_min, t_max)
+        q = self.device.queue
+        t_out = cla.empty(q, max(n, 1), np.float32)
+        tri_out = cla.empty(q, max(n, 1), np.int32)
+        uv_out = cla.empty(q, (max(n, 1), 2), np.float32)
+        if n:
+            _query_kernel(self.device, "KdQuery_closest")(
+                q, (n,), None, *self.kernel_args(), org.data, dirs.data, rng.data,
+                t_out.data, tri_out.data, uv_out.data, np.int32(n),
+            )
+        t, tri = t_out.get()[:n], tri_out.get()[:n]
+        t[tri < 0] = np.inf
+        if barycentrics:
+            return t, tri, uv_out.get()[:n]
+        return t, tri
+
+    def occluded(self, origins, directions, t_max, *, t_min=None) -> np.ndarray:
+        """Whether anything lies along each ray between ``t_min`` and ``t_max``."""
+        n, org, dirs, rng = self._rays(origins, directions, t_min, t_max)
+        q = self.device.queue
+        out = cla.empty(q, max(n, 1), np.int32)
+        if n:
+            _query_kernel(self.device, "KdQuery_occluded")(
+                q, (n,), None, *self.kernel_args(), org.data, dirs.data, rng.data, out.data, np.int32(n)
+            )
+        return out.get()[:n].astype(bool)
+
+    def _rays(self, origins, directions, t_min, t_max):
+        org = np.asarray(origins, np.float32).reshape(-1, 3)
+        dirs = np.asarray(directions, np.float32).reshape(-1, 3)
         n = len(org)
-        t_out = np.empty(n, np.float32)
-        tri_out = np.empty(n, np.int32)
-        if n == 0:
-            return t_out, tri_out
-        dev = self.device
-        prog = dev.program("kdtree_query.cl")
-        bt, bi = dev.empty(t_out.nbytes), dev.empty(tri_out.nbytes)
-        prog.KdQuery_closest(
-            dev.queue, (n,), None, *self.kernel_args(),
-            dev.buffer(org), dev.buffer(dirs), dev.buffer(tmax), bt, bi, np.int32(n),
-        )
-        cl.enqueue_copy(dev.queue, t_out, bt)
-        cl.enqueue_copy(dev.queue, tri_out, bi)
-        t_out[tri_out < 0] = np.inf
-        return t_out, tri_out
-
-    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max) -> np.ndarray:
-        """Whether anything lies along each ray before ``t_max``."""
-        org, dirs, tmax = _rays(origins, directions, t_max)
-        n = len(org)
-        out = np.empty(n, np.int32)
-        if n == 0:
-            return out.astype(bool)
-        dev = self.device
-        prog = dev.program("kdtree_query.cl")
-        bo = dev.empty(out.nbytes)
-        prog.KdQuery_occluded(
-            dev.queue, (n,), None, *self.kernel_args(),
-            dev.buffer(org), dev.buffer(dirs), dev.buffer(tmax), bo, np.int32(n),
-        )
-        cl.enqueue_copy(dev.queue, out, bo)
-        return out.astype(bool)
+        org4 = np.zeros((max(n, 1), 4), np.float32)
+        dir4 = np.zeros((max(n, 1), 4), np.float32)
+        org4[:n, :3], dir4[:n, :3] = org, dirs
+        rng = np.zeros((max(n, 1), 2), np.float32)
+        if t_min is None:
+            scale = np.maximum(np.abs(org).max(axis=1, initial=0.0), self.magnitude)
+            length = np.linalg.norm(dirs.astype(np.float64), axis=1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rng[:n, 0] = np.where(length > 0, SELF_HIT_SCALE * scale / length, 0.0)
+        else:
+            rng[:n, 0] = np.broadcast_to(np.asarray(t_min, np.float32), (n,))
+        if t_max is None:
+            rng[:n, 1] = _FAR
+        else:
+            tmax = np.broadcast_to(np.asarray(t_max, np.float32), (n,)).copy()
+            tmax[~np.isfinite(tmax)] = _FAR
+            rng[:n, 1] = tmax
+        q = self.device.queue
+        return n, cla.to_device(q, org4), cla.to_device(q, dir4), cla.to_device(q, rng)
 
 
-def _rays(origins, directions, t_max):
-    org = np.ascontiguousarray(np.asarray(origins, np.float32).reshape(-1, 3))
-    dirs = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
-    n = len(org)
-    org4 = np.zeros((n, 4), np.float32)
-    dir4 = np.zeros((n, 4), np.float32)
-    org4[:, :3], dir4[:, :3] = org, dirs
-    if t_max is None:
-        tmax = np.full(n, np.float32(3.0e38), np.float32)
-    else:
-        tmax = np.broadcast_to(np.asarray(t_max, np.float32), (n,)).copy()
-        tmax[~np.isfinite(tmax)] = np.float32(3.0e38)
-    return org4, dir4, tmax
+_QUERY_KERNELS: dict[tuple[int, str], cl.Kernel] = {}
+
+
+def _query_kernel(device: Device, name: str) -> cl.Kernel:
+    """A kernel of kdtree_query.cl, made once per device."""
+    key = (id(device), name)
+    if key not in _QUERY_KERNELS:
+        _QUERY_KERNELS[key] = cl.Kernel(device.program("kdtree_query.cl"), name)
+    return _QUERY_KERNELS[key]
 
 
 def build(device: Device, triangles: np.ndarray) -> KdTree:
-    """A kd-tree over ``triangles`` (``(N, 3, 3)`` float32) on ``device``."""
-    tris = np.ascontiguousarray(np.asarray(triangles, np.float32).reshape(-1, 3, 3))
+    """A kd-tree over ``triangles`` (``(N, 3, 3)`` float32), built on ``device``."""
+    tris = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
+    if not np.isfinite(tris).all():
+        bad = int((~np.isfinite(tris).all(axis=(1, 2))).sum())
+        raise SceneError(f"{bad} triangle(s) have non-finite corners; validate the scene first")
     start = time.perf_counter()
-    nodes, leaf_tris = _build_host(tris)
-    build_ms = (time.perf_counter() - start) * 1e3
-    verts = np.zeros((len(tris) * 3, 4), np.float32)
-    verts[:, :3] = tris.reshape(-1, 3)
-    if len(tris):
-        lo, hi = tris.reshape(-1, 3).min(axis=0), tris.reshape(-1, 3).max(axis=0)
-    else:
-        lo = hi = np.zeros(3, np.float32)
-    pad = 1e-6 * (np.abs(lo) + np.abs(hi)) + 1e-30
-    bmin = np.append(lo - pad, 0).astype(np.float32)
-    bmax = np.append(hi + pad, 0).astype(np.float32)
-    leaves = nodes["axis"] == LEAF
-    stats = {
-        "nodes": len(nodes),
-        "leaves": int(leaves.sum()),
-        "mean_leaf_size": float(nodes["count"][leaves].mean()) if leaves.any() else 0.0,
-        "max_leaf_size": int(nodes["count"][leaves].max()) if leaves.any() else 0,
-        "ms": {"build": build_ms},
-    }
+    count = len(tris)
+    verts = np.zeros((max(count, 1) * 3, 4), np.float32)
+    verts[: count * 3, :3] = tris.reshape(-1, 3)
+    verts_dev = cla.to_device(device.queue, verts.view(cltypes.float4).reshape(-1))
+    upload_ms = (time.perf_counter() - start) * 1e3
+    out = build_tree(device, verts_dev, count)
+    stats = dict(out.stats)
+    stats["ms"] = {"upload": upload_ms, **out.stats["ms"]}
+    stats["ms"]["total"] = (time.perf_counter() - start) * 1e3
+    stats["triangles"] = count
     return KdTree(
         device=device,
-        nodes=device.buffer(nodes),
-        leaf_tris=device.buffer(leaf_tris),
-        verts=device.buffer(verts),
-        bmin=bmin,
-        bmax=bmax,
-        triangle_count=len(tris),
+        nodes=out.nodes,
+        leaf_tris=out.leaf_tris,
+        verts=verts_dev,
+        bmin=out.bmin,
+        bmax=out.bmax,
+        triangle_count=count,
         stats=stats,
     )
 
-
-def _build_host(tris: np.ndarray):
-    """Preorder nodes and leaf lists by spatial-median splits of the longest axis."""
-    nodes: list[tuple] = []
-    leaf_lists: list[np.ndarray] = []
-    offset = [0]
-    lo_all, hi_all = tris.min(axis=1), tris.max(axis=1)
-
-    def emit_leaf(ids):
-        nodes.append((0.0, LEAF, offset[0], len(ids)))
-        leaf_lists.append(ids)
-        offset[0] += len(ids)
-
-    def recurse(ids, lo, hi, depth):
-        if len(ids) <= _LEAF_SIZE or depth >= _MAX_DEPTH:
-            emit_leaf(ids)
-            return
-        axis = int(np.argmax(hi - lo))
-        split = np.float32(0.5 * (lo[axis] + hi[axis]))
-        left = ids[lo_all[ids, axis] <= split]
-        right = ids[hi_all[ids, axis] >= split]
-        if len(left) == len(ids) and len(right) == len(ids):
-            emit_leaf(ids)
-            return
-        index = len(nodes)
-        nodes.append(None)
-        lhi, rlo = hi.copy(), lo.copy()
-        lhi[axis] = rlo[axis] = split
-        recurse(left, lo, lhi, depth + 1)
-        nodes[index] = (float(split), axis, len(nodes), 0)
-        recurse(right, rlo, hi, depth + 1)
-
-    if len(tris):
-        recurse(np.arange(len(tris), dtype=np.int32), lo_all.min(axis=0), hi_all.max(axis=0), 0)
-    else:
-        emit_leaf(np.zeros(0, np.int32))
-    node_arr = np.array(nodes, dtype=NODE_DTYPE)
-    leaf_arr = np.concatenate(leaf_lists).astype(np.int32) if leaf_lists else np.zeros(0, np.int32)
-    return node_arr, leaf_arr
