@@ -28,10 +28,14 @@ LIGHT_DTYPE = np.dtype(
         ("axis_u", F4),
         ("axis_v", F4),
         ("power", F4),
+        ("radiance", F4),
+        ("radius", np.float32),
+        ("cos_half", np.float32),
+        ("spot_smooth", np.float32),
+        ("sun_norm", np.float32),
         ("kind", np.int32),
         ("shape", np.int32),
-        ("pick_pdf", np.float32),
-        ("pad", np.int32),
+        ("pad", np.int32, 2),
     ]
 )
 

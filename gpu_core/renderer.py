@@ -19,8 +19,10 @@ from .device import Device
 from .errors import BudgetError, RenderCancelled
 from .layout import CAMERA_DTYPE, LIGHT_DTYPE, MATERIAL_DTYPE, TEXTURE_INFO_DTYPE
 from .scene import (
+    AREA_ELLIPSE,
     CAMERA_ORTHO,
     LIGHT_AREA,
+    LIGHT_POINT,
     LIGHT_SPOT,
     LIGHT_SUN,
     Scene,
@@ -28,8 +30,11 @@ from .scene import (
 )
 from .settings import RenderSettings
 
-LIGHT_MESH = 4
-_TARGET_BATCH_SECONDS = 0.12
+LIGHT_MESH = 4  # kernels/types.h: all emissive triangles as one light row
+_BATCH_SECONDS = 0.1  # aimed duration of one kernel launch (cancel latency)
+_FIRST_BATCH_PATHS = 1 << 14  # camera paths in the first launch, before any timing
+_MIN_BATCH = 64
+_RADIANCE_MAX = 1e30  # light radiance stays a finite float32
 
 
 @dataclass
@@ -78,8 +83,6 @@ class _Uploaded:
     texture_infos: cl.Buffer
     camera: cl.Buffer
     world: np.ndarray
-    eps: float
-    nbytes: int
 
 
 class Renderer:
@@ -99,23 +102,22 @@ class Renderer:
         timer = _Timer()
         with timer.stage("validate"):
             scene = validate(scene)
-        plan = ["validate", "kdtree", "direct_light"]
-        if settings.diffuse_bounces > 0:
-            plan.append("path_traced_indirect")
-        if scene.textures:
-            plan.append("textures")
-        if _emissive_triangles(scene)[0].size:
-            plan.append("mesh_lights")
-        defines = {}
-        if (scene.materials.alpha[np.unique(scene.material_ids)] < 1.0).any():
-            plan.append("alpha_shadows")
-            defines["RENDER_HAS_ALPHA"] = 1
+        emit_tris, emit_cdf = _emissive_triangles(scene)
+        plan, defines = _plan(scene, settings, len(emit_tris))
+        self._check_budget(scene)
+        _check_stop(should_stop)
+
+        # positions relative to the scene centre keep float32 precision far from the origin
+        lo, hi = scene.bounds()
+        center = 0.5 * (lo + hi)
+        with timer.stage("kdtree"):
+            tree = kdtree.build(self.device, (scene.triangles - center).astype(np.float32))
         _check_stop(should_stop)
         with timer.stage("upload"):
-            up = self._upload(scene, timer)
-        _check_stop(should_stop)
+            up = self._upload(scene, center, tree, emit_tris, emit_cdf)
         with timer.stage("compile"):
             program = self.device.program("render.cl", defines)
+        _check_stop(should_stop)
         with timer.stage("render"):
             passes, batches = self._run(program, up, scene, settings, progress, should_stop)
         stats = {
@@ -128,7 +130,8 @@ class Renderer:
             "textures": len(scene.textures),
             "batches": batches,
             "samples": settings.samples,
-            "device_bytes": up.nbytes,
+            "light_samples": settings.light_samples,
+            "device_bytes": _device_bytes(scene),
             "kdtree": up.tree.stats,
             **scene.report.as_stats(),
         }
@@ -139,29 +142,27 @@ class Renderer:
 
     # -- upload ---------------------------------------------------------------
 
-    def _upload(self, scene: Scene, timer: _Timer) -> _Uploaded:
+    def _check_budget(self, scene: Scene) -> None:
+        """A clear error before any upload when the scene cannot fit the device."""
         dev = self.device
-        lo, hi = scene.bounds()
-        center = 0.5 * (lo + hi)
-        extent = float(max(np.max(hi - lo), 1e-30))
-        # positions relative to the scene centre keep float32 precision far from the origin
-        tris = (scene.triangles - center).astype(np.float32)
-        with timer.stage("kdtree"):
-            tree = kdtree.build(dev, tris)
-        n = scene.triangle_count
-        normals = np.zeros((n * 3, 4), np.float32)
+        need = _device_bytes(scene)
+        largest = max(scene.triangle_count * 48, _texels(scene) * 16)
+        if need > dev.global_mem_bytes or largest > dev.max_alloc_bytes:
+            raise BudgetError(
+                f"the scene needs about {need / 2**20:.0f} MiB of device memory "
+                f"(largest buffer {largest / 2**20:.0f} MiB); {dev.name} has "
+                f"{dev.global_mem_bytes / 2**20:.0f} MiB ({dev.max_alloc_bytes / 2**20:.0f} MiB per buffer). "
+                "Lower the resolution or texture sizes, or simplify the scene."
+            )
+
+    def _upload(self, scene: Scene, center: np.ndarray, tree: kdtree.KdTree,
+                emit_tris: np.ndarray, emit_cdf: np.ndarray) -> _Uploaded:
+        dev = self.device
+        normals = np.zeros((scene.triangle_count * 3, 4), np.float32)
         normals[:, :3] = scene.normals.reshape(-1, 3)
         uvs = np.ascontiguousarray(scene.uvs.reshape(-1, 2), dtype=np.float32)
-        emit_tris, emit_cdf = _emissive_triangles(scene)
-        lights = _light_table(scene, center, emit_count=len(emit_tris))
+        lights = _light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
         atlas, infos = _texture_atlas(scene.textures)
-        arrays = [normals, uvs, scene.material_ids, lights, atlas]
-        nbytes = int(sum(a.nbytes for a in arrays) + tris.nbytes * 2)
-        if nbytes > dev.global_mem_bytes:
-            raise BudgetError(
-                f"scene needs about {nbytes / 2**20:.0f} MiB of device memory, "
-                f"{dev.name} has {dev.global_mem_bytes / 2**20:.0f} MiB"
-            )
         return _Uploaded(
             tree=tree,
             normals=dev.buffer(normals),
@@ -177,8 +178,6 @@ class Renderer:
             texture_infos=dev.buffer(infos),
             camera=dev.buffer(_camera_struct(scene, center)),
             world=np.append(scene.world_color, 0.0).astype(np.float32),
-            eps=2e-5 * extent,
-            nbytes=nbytes,
         )
 
     # -- image kernel ---------------------------------------------------------
@@ -192,7 +191,10 @@ class Renderer:
         world = up.world.copy()
         world[3] = 1.0 if settings.transparent_background else 0.0
         kernel = cl.Kernel(program, "Render_pixels")
-        start, batch, batches = 0, min(settings.batch_pixels, total), 0
+        # the first launch is sized by its path count; later ones by the measured speed
+        paths_per_pixel = settings.samples * settings.light_samples
+        batch = int(np.clip(_FIRST_BATCH_PATHS // paths_per_pixel, _MIN_BATCH, settings.batch_pixels))
+        start, batches = 0, 0
         while start < total:
             count = min(batch, total - start)
             began = time.perf_counter()
@@ -203,8 +205,7 @@ class Renderer:
                 up.atlas, up.texture_infos, up.camera, world,
                 np.array([w, h, count, start], np.int32), np.array([x0, y0], np.int32),
                 np.int32(settings.samples), np.int32(settings.max_bounces), np.int32(settings.diffuse_bounces),
-                np.uint32(settings.seed),
-                np.float32(up.eps), np.float32(settings.clamp),
+                np.int32(settings.light_samples), np.uint32(settings.seed), np.float32(settings.clamp),
                 combined, depth, normal,
             )
             dev.queue.finish()
@@ -215,9 +216,8 @@ class Renderer:
                 progress(start / total, f"rendered {start}/{total} pixels")
             if start < total:
                 _check_stop(should_stop)
-            # size the next batch so one launch takes about _TARGET_BATCH_SECONDS
-            scale = _TARGET_BATCH_SECONDS / max(elapsed, 1e-4)
-            batch = int(np.clip(count * scale, 64, max(settings.batch_pixels, 64) * 16))
+            scale = _BATCH_SECONDS / max(elapsed, 1e-4)
+            batch = int(np.clip(count * min(scale, 4.0), _MIN_BATCH, settings.batch_pixels))
         out_c = np.empty((total, 4), np.float32)
         out_d = np.empty(total, np.float32)
         out_n = np.empty((total, 4), np.float32)
@@ -236,25 +236,63 @@ def _check_stop(should_stop) -> None:
         raise RenderCancelled("render cancelled")
 
 
+def _plan(scene: Scene, settings: RenderSettings, emissive_count: int) -> tuple[list[str], dict]:
+    """The stages and kernel features this scene needs, and their defines."""
+    plan = ["validate", "kdtree", "upload", "direct_light"]
+    defines = {}
+    used = np.unique(scene.material_ids)
+    m = scene.materials
+    if ((m.metallic[used] > 0) | (m.transmission[used] > 0)).any():
+        plan.append("specular_paths")
+    if settings.diffuse_bounces > 0:
+        plan.append("path_traced_indirect")
+    if scene.textures and (m.texture_id[used] >= 0).any():
+        plan.append("textures")
+        defines["RENDER_HAS_TEXTURES"] = 1
+    if emissive_count:
+        plan.append("mesh_lights")
+    if (m.alpha[used] < 1.0).any():
+        plan.append("alpha_shadows")
+        defines["RENDER_HAS_ALPHA"] = 1
+    return plan, defines
+
+
+def _device_bytes(scene: Scene) -> int:
+    """Device memory the render needs, kd-tree nodes estimated."""
+    n = scene.triangle_count
+    x0, y0, x1, y1 = scene.camera.pixel_window
+    geometry = n * (48 + 48 + 24 + 4)  # verts, normals, uvs, material ids
+    tree = n * 4 * 8 + n * 16  # leaf references and nodes, a generous estimate
+    textures = _texels(scene) * 16
+    film = (x1 - x0) * (y1 - y0) * 36
+    return int(geometry + tree + textures + film + len(scene.lights) * LIGHT_DTYPE.itemsize)
+
+
 def _material_table(scene: Scene) -> np.ndarray:
     m = scene.materials
     table = np.zeros(len(m), MATERIAL_DTYPE)
-    table["base_color"][:, :3] = np.clip(m.base_color, 0.0, 1.0)
-    table["base_color"][:, 3] = np.clip(m.alpha, 0.0, 1.0)
-    table["emission"][:, :3] = np.maximum(m.emission, 0.0)
-    table["metallic"] = np.clip(m.metallic, 0.0, 1.0)
-    table["roughness"] = np.clip(m.roughness, 0.0, 1.0)
-    table["transmission"] = np.clip(m.transmission, 0.0, 1.0)
-    table["ior"] = np.maximum(m.ior, 1e-3)
+    table["base_color"][:, :3] = np.clip(np.nan_to_num(m.base_color), 0.0, 1.0)
+    table["base_color"][:, 3] = np.clip(np.nan_to_num(m.alpha, nan=1.0), 0.0, 1.0)
+    table["emission"][:, :3] = _emission(scene)
+    table["metallic"] = np.clip(np.nan_to_num(m.metallic), 0.0, 1.0)
+    table["roughness"] = np.clip(np.nan_to_num(m.roughness), 0.0, 1.0)
+    table["transmission"] = np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)
+    table["ior"] = np.clip(np.nan_to_num(m.ior, nan=1.5), 1e-3, 1e3)
     table["texture"] = np.where(m.texture_id < len(scene.textures), m.texture_id, -1)
     return table
 
 
+def _emission(scene: Scene) -> np.ndarray:
+    """Material emission radiance, finite and not negative."""
+    e = np.nan_to_num(np.asarray(scene.materials.emission, np.float64), nan=0.0, posinf=_RADIANCE_MAX)
+    return np.clip(e, 0.0, _RADIANCE_MAX).astype(np.float32)
+
+
 def _emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Emissive triangle ids and their inclusive power CDF."""
+    """Emissive triangle ids and their inclusive CDF by power (luminance x area)."""
     if scene.triangle_count == 0:
         return np.zeros(0, np.int32), np.zeros(0, np.float32)
-    emission = scene.materials.emission[scene.material_ids]
+    emission = _emission(scene).astype(np.float64)[scene.material_ids]
     luminance = emission @ np.array([0.2126, 0.7152, 0.0722])
     tris = scene.triangles
     area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
@@ -262,43 +300,81 @@ def _emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     ids = np.nonzero(power > 0)[0].astype(np.int32)
     if ids.size == 0:
         return ids, np.zeros(0, np.float32)
-    cdf = np.cumsum(power[ids].astype(np.float64))
+    cdf = np.cumsum(power[ids])
     cdf = (cdf / cdf[-1]).astype(np.float32)
     cdf[-1] = 1.0
     return ids, cdf
 
 
-def _light_table(scene: Scene, center: np.ndarray, emit_count: int) -> np.ndarray:
-    """The device light rows; emissive meshes add one LIGHT_MESH row."""
+def _light_table(scene: Scene, center: np.ndarray, has_mesh_lights: bool) -> np.ndarray:
+    """Device light rows in Cycles' units (see kernels/lights.h); emissive
+    meshes add one LIGHT_MESH row. Derived values are computed in float64."""
     lights = scene.lights
-    count = len(lights) + (1 if emit_count else 0)
-    table = np.zeros(count, LIGHT_DTYPE)
     n = len(lights)
-    if n:
-        direction = lights.direction / np.maximum(np.linalg.norm(lights.direction, axis=1, keepdims=True), 1e-30)
-        table["position"][:n, :3] = lights.position - center
-        table["position"][:n, 3] = np.maximum(lights.radius, 0.0)
-        table["direction"][:n, :3] = direction
-        half = 0.5 * np.clip(lights.spot_angle, 1e-4, np.pi)
-        cos_half = np.cos(half)
-        table["direction"][:n, 3] = np.where(lights.kind == LIGHT_SPOT, cos_half, -2.0)
-        blend_width = (1.0 - cos_half) * np.clip(lights.spot_blend, 0.0, 1.0)
-        table["axis_u"][:n, :3] = lights.axis_u
-        table["axis_u"][:n, 3] = np.where(blend_width > 1e-12, 1.0 / np.maximum(blend_width, 1e-12), 1e12)
-        table["axis_v"][:n, :3] = lights.axis_v
-        table["axis_v"][:n, 3] = np.cos(0.5 * np.clip(lights.sun_angle, 0.0, np.pi))
-        table["power"][:n, :3] = lights.power
-        area = np.linalg.norm(np.cross(lights.axis_u, lights.axis_v), axis=1)
-        table["power"][:n, 3] = np.where(lights.shape == 1, area * np.pi / 4.0, area)
-        table["kind"][:n] = lights.kind
-        table["shape"][:n] = lights.shape
-        # a point of a zero-size area light cannot emit: treat it as black
-        zero_area = (lights.kind == LIGHT_AREA) & (area <= 0)
-        table["power"][:n, :3][zero_area] = 0.0
-    if emit_count:
+    table = np.zeros(n + (1 if has_mesh_lights else 0), LIGHT_DTYPE)
+    if has_mesh_lights:
         table["kind"][n] = LIGHT_MESH
-    table["pick_pdf"] = 1.0
+    if not n:
+        return table
+    kind = lights.kind
+    power = _finite(lights.power)
+    direction = _finite(lights.direction)
+    length = np.linalg.norm(direction, axis=1, keepdims=True)
+    direction = np.where(length > 0, direction / np.where(length > 0, length, 1.0), [0.0, 0.0, -1.0])
+    axis_u, axis_v = _finite(lights.axis_u), _finite(lights.axis_v)
+    radius = np.maximum(_finite(lights.radius), 0.0)
+
+    # area lights: radiance P / (pi A), A of the rectangle or ellipse
+    area = np.linalg.norm(np.cross(axis_u, axis_v), axis=1)
+    area = np.where(lights.shape == AREA_ELLIPSE, area * np.pi / 4.0, area)
+    is_area = kind == LIGHT_AREA
+    power[is_area & ~(area > 0)] = 0.0  # a zero-size area light emits nothing
+    radiance = np.zeros_like(power)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radiance[is_area] = power[is_area] / (np.pi * area[is_area, None])
+        # point and spot lights: a disk of radius r with radiance P / (4 pi^2 r^2)
+        disk = ((kind == LIGHT_POINT) | (kind == LIGHT_SPOT)) & (radius > 0)
+        radiance[disk] = power[disk] / (4.0 * np.pi**2 * radius[disk, None] ** 2)
+
+    # spot cone: cos of the half angle and the smoothstep scale of the blend
+    cos_half = np.ones(n)
+    spot = kind == LIGHT_SPOT
+    cos_spot = np.cos(0.5 * np.clip(_finite(lights.spot_angle), 0.0, np.pi))
+    cos_half[spot] = cos_spot[spot]
+    blend_width = (1.0 - cos_spot) * np.clip(_finite(lights.spot_blend), 0.0, 1.0)
+    spot_smooth = np.where(blend_width > 1e-12, 1.0 / np.maximum(blend_width, 1e-12), 1e30)
+
+    # sun: a disk of directions with radiance S / (pi sin^2(half angle))
+    sun = kind == LIGHT_SUN
+    half = 0.5 * np.clip(_finite(lights.sun_angle), 0.0, np.pi)
+    cos_half[sun] = np.cos(half[sun])
+    sun_disk = sun & (half > 0)
+    radiance[sun_disk] = power[sun_disk] / (np.pi * np.sin(half[sun_disk, None]) ** 2)
+    sun_norm = np.where(sun, 2.0 / (1.0 + cos_half), 1.0)
+
+    table["position"][:n, :3] = _finite(lights.position - center)
+    table["direction"][:n, :3] = direction
+    table["axis_u"][:n, :3] = axis_u
+    table["axis_v"][:n, :3] = axis_v
+    table["power"][:n, :3] = power
+    table["radiance"][:n, :3] = np.clip(np.nan_to_num(radiance, nan=0.0, posinf=_RADIANCE_MAX), 0.0, _RADIANCE_MAX)
+    table["radius"][:n] = radius
+    table["cos_half"][:n] = cos_half
+    table["spot_smooth"][:n] = spot_smooth
+    table["sun_norm"][:n] = sun_norm
+    table["kind"][:n] = kind
+    table["shape"][:n] = lights.shape
     return table
+
+
+def _finite(values) -> np.ndarray:
+    """float64 copy with NaN and infinities replaced by 0."""
+    return np.nan_to_num(np.asarray(values, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def _texels(scene: Scene) -> int:
+    """Texels of all textures: the atlas holds one float4 each."""
+    return sum(int(np.prod(np.shape(t)[:2])) for t in scene.textures)
 
 
 def _texture_atlas(textures: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -308,7 +384,9 @@ def _texture_atlas(textures: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     for i, tex in enumerate(textures):
         img = np.asarray(tex, np.float32)
         if img.ndim == 2:
-            img = np.repeat(img[..., None], 4, axis=2)
+            img = img[..., None]
+        if img.shape[2] == 1:
+            img = np.concatenate([np.repeat(img, 3, axis=2), np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
         if img.shape[2] == 3:
             img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
         img = np.nan_to_num(img[..., :4], nan=0.0, posinf=0.0, neginf=0.0)
@@ -333,4 +411,3 @@ def _camera_struct(scene: Scene, center: np.ndarray) -> np.ndarray:
     out["width"], out["height"] = cam.width, cam.height
     out["clip_start"], out["clip_end"] = cam.clip_start, cam.clip_end
     return out
-

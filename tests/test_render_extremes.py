@@ -6,7 +6,7 @@ from scenes_py import camera_looking_down, make_scene, plane_scene, quad
 
 from gpu_core.errors import RenderCancelled
 from gpu_core.renderer import Renderer
-from gpu_core.scene import LIGHT_AREA, LIGHT_POINT, Lights, Materials
+from gpu_core.scene import AREA_ELLIPSE, LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN, Lights, Materials
 from gpu_core.settings import RenderSettings
 
 SIZE = 32
@@ -35,7 +35,8 @@ def unit_image(device):
     return _render(device, _scene()).passes["Combined"]
 
 
-@pytest.mark.parametrize("scale, offset", [(1e-3, (0, 0, 0)), (1e4, (0, 0, 0)), (1.0, (1e5, -1e5, 1e5)), (1e-3, (50.0, 0, 0))])
+@pytest.mark.parametrize("scale, offset", [(1e-4, (0, 0, 0)), (1e-3, (0, 0, 0)), (1e4, (0, 0, 0)), (1e5, (0, 0, 0)),
+                                           (1.0, (1e5, -1e5, 1e5)), (1e-3, (50.0, 0, 0))])
 def test_scaled_and_distant_scenes_render_like_the_unit_scene(device, unit_image, scale, offset):
     img = _render(device, _scene(scale, offset)).passes["Combined"]
     assert np.isfinite(img).all()
@@ -84,6 +85,25 @@ def test_degenerate_geometry_and_lights_render_finite(device):
     res = _render(device, scene)
     assert np.isfinite(res.passes["Combined"]).all()
     assert res.stats["dropped_degenerate_triangles"] == 2
+
+
+@pytest.mark.parametrize("light", [
+    dict(kind=LIGHT_POINT, position=(0, 0, 1.0), power=(1e8,) * 3, radius=1e-30),  # radiance beyond float32
+    dict(kind=LIGHT_POINT, position=(0, 0, 0.5), power=(10,) * 3, radius=1e6),  # the scene inside the light
+    dict(kind=LIGHT_SPOT, position=(0, 0, 1.0), power=(10,) * 3, spot_angle=0.0, spot_blend=0.0),
+    dict(kind=LIGHT_SPOT, position=(0, 0, 1.0), power=(10,) * 3, spot_angle=np.pi, spot_blend=1.0, radius=0.2),
+    dict(kind=LIGHT_SUN, direction=(0, 0, -1), power=(5,) * 3, sun_angle=np.pi),
+    dict(kind=LIGHT_SUN, direction=(0, 0, 0), power=(5,) * 3, sun_angle=1e-30),  # no direction
+    dict(kind=LIGHT_AREA, position=(0, 0, 1.0), power=(1e8,) * 3, axis_u=(1e-20, 0, 0), axis_v=(0, 1e-20, 0)),
+    dict(kind=LIGHT_AREA, position=(0, 0, 1e-9), power=(10,) * 3, axis_u=(1e6, 0, 0), axis_v=(0, 1e6, 0),
+         shape=AREA_ELLIPSE),
+    dict(kind=LIGHT_AREA, position=(0, 0, 1.0), power=(10,) * 3, axis_u=(1, 0, 0), axis_v=(2, 0, 0)),  # flat
+])
+def test_extreme_light_parameters_render_finite(device, light):
+    scene = plane_scene(Lights.make([light]), camera_looking_down(size=SIZE))
+    res = _render(device, scene)
+    assert np.isfinite(res.passes["Combined"]).all()
+    assert (res.passes["Combined"][..., :3] >= 0).all()
 
 
 def test_cancel_stops_after_the_first_batch(device):

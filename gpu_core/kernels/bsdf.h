@@ -20,6 +20,13 @@ inline int Bsdf_pick(const Material *m, float u) {
 
 inline float3 Bsdf_reflect(float3 d, float3 n) { return d - 2.0f * dot(d, n) * n; }
 
+/* Perfect mirror about the shading normal n, or about the geometric normal
+ * ng (facing d's origin) where n would reflect below the surface. */
+inline float3 Bsdf_mirror(float3 d, float3 n, float3 ng) {
+    float3 r = Bsdf_reflect(d, n);
+    return dot(r, ng) > 0.0f ? r : Bsdf_reflect(d, ng);
+}
+
 /* Unpolarised Fresnel reflectance of a dielectric; cos_i > 0 on the incident
  * side, eta = n_incident / n_transmitted. Returns 1 on total internal
  * reflection and writes cos_t otherwise. */
@@ -36,25 +43,29 @@ inline float Bsdf_fresnel(float cos_i, float eta, float *cos_t) {
     return 0.5f * (rs * rs + rp * rp);
 }
 
-/* Scatter d off smooth glass with normal n (any side): reflect with the
- * Fresnel probability, else refract. Writes whether it refracted. */
-inline float3 Bsdf_glass(float3 d, float3 n, float ior, float u, bool *refracted) {
+/* Scatter d off smooth glass: reflect with the Fresnel probability, else
+ * refract. `entering` (from the geometric normal) sets the side of the
+ * index change; n is the shading normal on the incident side and ng the
+ * geometric one, used instead where the smooth normal would send the ray to
+ * the wrong side of the surface. Writes whether it refracted. */
+inline float3 Bsdf_glass(float3 d, float3 n, float3 ng, bool entering, float ior, float u, bool *refracted) {
+    float eta = entering ? 1.0f / ior : ior;
+    if (dot(d, n) >= 0.0f) n = ng;
     float cos_i = -dot(d, n);
-    float3 nn = n;
-    float eta = 1.0f / fmax(ior, 1e-3f);
-    if (cos_i < 0.0f) { /* leaving the object */
-        cos_i = -cos_i;
-        nn = -n;
-        eta = 1.0f / eta;
-    }
     float cos_t;
     float f = Bsdf_fresnel(cos_i, eta, &cos_t);
-    if (u < f) {
+    *refracted = u >= f;
+    if (!*refracted) return Bsdf_mirror(d, n, ng);
+    float3 t = normalize(eta * d + (eta * cos_i - cos_t) * n);
+    if (dot(t, ng) < 0.0f) return t;
+    /* the smooth normal bent the ray back: refract by the geometric normal */
+    cos_i = -dot(d, ng);
+    f = Bsdf_fresnel(cos_i, eta, &cos_t);
+    if (f >= 1.0f) {
         *refracted = false;
-        return Bsdf_reflect(d, nn);
+        return Bsdf_reflect(d, ng);
     }
-    *refracted = true;
-    return normalize(eta * d + (eta * cos_i - cos_t) * nn);
+    return normalize(eta * d + (eta * cos_i - cos_t) * ng);
 }
 
 #endif

@@ -4,6 +4,7 @@
 #include "rng.h"
 #include "sampling.h"
 #include "camera.h"
+#include "ray.h"
 #include "lights.h"
 #include "bsdf.h"
 #include "texture.h"
@@ -19,6 +20,7 @@ typedef struct {
     float3 ng_raw; /* geometric normal as wound */
     float2 uv;
     int material;
+    float eps;    /* offset for rays leaving this point */
 } SurfacePoint;
 
 inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tri_normals,
@@ -39,6 +41,8 @@ inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tr
     s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
     s.uv = w * tri_uvs[3 * t] + hit->u * tri_uvs[3 * t + 1] + hit->v * tri_uvs[3 * t + 2];
     s.material = tri_material[t];
+    /* p is rounded like the largest vertex coordinate it was made from */
+    s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
     return s;
 }
 
@@ -47,7 +51,7 @@ inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tr
  * their transparencies. */
 inline float Render_visibility(const KdTree *tree, const __global int *tri_material,
                                const __global Material *materials, float3 org, float3 dir,
-                               float tmax, float eps) {
+                               float tmax) {
 #ifdef RENDER_HAS_ALPHA
     float vis = 1.0f, tmin = 0.0f;
     for (int i = 0; i < RENDER_MAX_PASSTHROUGH; ++i) {
@@ -56,7 +60,7 @@ inline float Render_visibility(const KdTree *tree, const __global int *tri_mater
         float alpha = materials[tri_material[hit.tri]].base_color.w;
         if (alpha >= 1.0f) return 0.0f;
         vis *= 1.0f - alpha;
-        tmin = hit.t + eps;
+        tmin = hit.t + Ray_offset(fmax(hit.t, Ray_magnitude(org)));
     }
     return 0.0f;
 #else
@@ -64,26 +68,42 @@ inline float Render_visibility(const KdTree *tree, const __global int *tri_mater
 #endif
 }
 
-/* Direct light at a diffuse point from every light, world included. */
+/* Direct light at a diffuse point from every light, world included:
+ * light_samples shadow rays per light, averaged. Shadow rays leave from just
+ * above the surface on the side the path arrived from (ng). */
 inline float3 Render_direct(const KdTree *tree, const __global int *tri_material,
                             const __global Material *materials, const __global Light *lights,
-                            int light_count, const Emitters *em, float3 world, float3 p, float3 n,
-                            float eps, Rng *rng) {
-    /* shadow rays leave from just above the surface */
+                            int light_count, const Emitters *em, float3 world,
+                            const SurfacePoint *sp, int light_samples, Rng *rng) {
     float3 sum = (float3)(0.0f);
-    float3 org = p + eps * n;
+    float3 org = sp->p + sp->eps * sp->ng;
+    bool has_world = world.x > 0.0f || world.y > 0.0f || world.z > 0.0f;
+    for (int k = 0; k < light_samples; ++k) {
+        for (int i = 0; i < light_count; ++i) {
+            Light l = lights[i];
+            float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
+            /* sample from the offset origin so the shadow ray ends at the light */
+            LightSample ls = Light_sample(&l, em, org, sp->ns, u0, u1, u2);
+            if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f) || !(ls.dist > 0.0f)) continue;
+            sum += ls.value * Render_visibility(tree, tri_material, materials, org, ls.dir, ls.dist);
+        }
+        if (has_world) {
+            LightSample ls = Light_sample_world(world, sp->ns, Rng_next(rng), Rng_next(rng));
+            sum += ls.value * Render_visibility(tree, tri_material, materials, org, ls.dir, LIGHT_FAR);
+        }
+    }
+    return sum / (float)light_samples;
+}
+
+/* Radiance of the lights a specular ray passes before tmax; an
+ * escaping ray also sees sun disks. */
+inline float3 Render_lights_seen(const __global Light *lights, int light_count, float3 org, float3 dir,
+                                 float tmax, bool escaped) {
+    float3 sum = (float3)(0.0f);
     for (int i = 0; i < light_count; ++i) {
         Light l = lights[i];
-        float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
-        /* sample from the offset origin so the shadow ray ends at the light */
-        LightSample ls = Light_sample(&l, em, org, n, u0, u1, u2);
-        if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f)) continue;
-        float tmax = ls.dist < LIGHT_FAR ? ls.dist * (1.0f - 1e-4f) - eps : LIGHT_FAR;
-        if (tmax > 0.0f) sum += ls.value * Render_visibility(tree, tri_material, materials, org, ls.dir, tmax, eps);
-    }
-    if (world.x > 0.0f || world.y > 0.0f || world.z > 0.0f) {
-        LightSample ls = Light_sample_world(world, n, Rng_next(rng), Rng_next(rng));
-        sum += ls.value * Render_visibility(tree, tri_material, materials, org, ls.dir, LIGHT_FAR, eps);
+        sum += Light_seen(&l, org, dir, tmax);
+        if (escaped) sum += Light_sun_seen(&l, dir);
     }
     return sum;
 }
@@ -99,8 +119,8 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                             const __global float4 *tex_atlas, const __global TextureInfo *tex_infos,
                             const __global Camera *camera_buf, const float4 world,
                             const int4 window, const int2 window_origin, const int samples, const int max_bounces,
-                            const int max_diffuse,
-                            const uint seed, const float eps, const float clamp_value,
+                            const int max_diffuse, const int light_samples,
+                            const uint seed, const float clamp_value,
                             __global float4 *out_combined, __global float *out_depth,
                             __global float4 *out_normal) {
     int i = get_global_id(0);
@@ -118,11 +138,17 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
     float alpha_sum = 0.0f;
     float depth = 1e10f;
     float3 normal = (float3)(0.0f);
+    /* anti-aliasing: the pixel's samples follow the R2 sequence from a
+     * random offset, so they cover its area evenly */
+    uint pixel_id = (uint)(py * cam.width + px);
+    uint aa_x = Rng_hash(pixel_id ^ Rng_hash(seed ^ 0xa511e9b3U));
+    uint aa_y = Rng_hash(aa_x);
     for (int s = 0; s < samples; ++s) {
-        Rng rng = Rng_make((uint)(py * cam.width + px), (uint)s, seed);
+        Rng rng = Rng_make(pixel_id, (uint)s, seed);
         float3 org, dir;
         float tmin, tmax;
-        Camera_ray(&cam, px + Rng_next(&rng), py + Rng_next(&rng), &org, &dir, &tmin, &tmax);
+        float2 aa = Rng_r2((uint)s, aa_x, aa_y);
+        Camera_ray(&cam, px + aa.x, py + aa.y, &org, &dir, &tmin, &tmax);
         float3 throughput = (float3)(1.0f);
         float3 radiance = (float3)(0.0f);
         float alpha = 1.0f;
@@ -131,7 +157,13 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
          * directly (next-event estimation): hitting them again is not counted */
         while (true) {
             Hit hit;
-            if (!KdTree_intersect(&tree, org, dir, tmin, tmax, &hit)) {
+            bool found = KdTree_intersect(&tree, org, dir, tmin, tmax, &hit);
+            /* lights are see-through emitters: add those before the surface.
+             * As in Cycles by default, only specular rays see them, not the
+             * camera (and paths past a diffuse bounce sampled them already). */
+            if (bounces > 0 && diffuse == 0 && light_count > 0)
+                radiance += throughput * Render_lights_seen(lights, light_count, org, dir, found ? hit.t : tmax, !found);
+            if (!found) {
                 if (bounces == 0 && passes == 0 && transparent) alpha = 0.0f;
                 else if (diffuse == 0) radiance += throughput * sky;
                 break;
@@ -140,17 +172,15 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
             Material m = materials[sp.material];
             float3 base = m.base_color.xyz;
             float mat_alpha = m.base_color.w;
-            if (m.texture >= 0) {
-                float4 tex = Texture_sample(tex_atlas, tex_infos, m.texture, sp.uv);
-                base *= tex.xyz;
-            }
-            float peps = eps * (1.0f + 1e-3f * fmax(fmax(fabs(sp.p.x), fabs(sp.p.y)), fabs(sp.p.z)));
+#ifdef RENDER_HAS_TEXTURES
+            if (m.texture >= 0) base *= Texture_sample(tex_atlas, tex_infos, m.texture, sp.uv).xyz;
+#endif
             /* stochastic alpha: pass straight through */
             if (mat_alpha < 1.0f && Rng_next(&rng) >= mat_alpha && passes < RENDER_MAX_PASSTHROUGH) {
                 passes++;
-                org = sp.p - peps * sp.ng;
+                org = sp.p - sp.eps * sp.ng;
                 tmin = 0.0f;
-                tmax = 3.0e38f;
+                tmax = RAY_FAR;
                 continue;
             }
             if (bounces == 0 && s == 0) {
@@ -160,7 +190,7 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
             if (diffuse == 0) radiance += throughput * m.emission.xyz;
             int lobe = Bsdf_pick(&m, Rng_next(&rng));
             if (lobe == BSDF_DIFFUSE) {
-                float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, sp.p, sp.ns, peps, &rng);
+                float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, &sp, light_samples, &rng);
                 radiance += throughput * base * (1.0f / PI_F) * e;
                 /* path-traced indirect light: cosine sampling cancels the
                  * Lambert cosine/pi, leaving the albedo; Russian roulette
@@ -174,9 +204,9 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 }
                 dir = Sampling_cosine(sp.ns, Rng_next(&rng), Rng_next(&rng));
                 if (dot(dir, sp.ng) <= 0.0f) break;
-                org = sp.p + peps * sp.ng;
+                org = sp.p + sp.eps * sp.ng;
                 tmin = 0.0f;
-                tmax = 3.0e38f;
+                tmax = RAY_FAR;
                 diffuse++;
                 bounces++;
                 continue;
@@ -184,16 +214,17 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
             if (bounces >= max_bounces + max_diffuse) break;
             bool refracted = false;
             if (lobe == BSDF_MIRROR) {
-                dir = Bsdf_reflect(dir, sp.ns);
-                if (dot(dir, sp.ng) < 0.0f) dir = Bsdf_reflect(dir, sp.ng);
+                dir = Bsdf_mirror(dir, sp.ns, sp.ng);
                 throughput *= base;
             } else {
-                dir = Bsdf_glass(dir, sp.ng_raw, m.ior, Rng_next(&rng), &refracted);
+                /* the wound normal facing the ray means entering the object */
+                bool entering = dot(sp.ng_raw, sp.ng) > 0.0f;
+                dir = Bsdf_glass(dir, sp.ns, sp.ng, entering, m.ior, Rng_next(&rng), &refracted);
                 if (refracted) throughput *= base;
             }
-            org = sp.p + (refracted ? -peps : peps) * sp.ng;
+            org = sp.p + (refracted ? -sp.eps : sp.eps) * sp.ng;
             tmin = 0.0f;
-            tmax = 3.0e38f;
+            tmax = RAY_FAR;
             bounces++;
         }
         if (clamp_value > 0.0f) radiance = fmin(radiance, (float3)(clamp_value));

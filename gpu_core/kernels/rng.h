@@ -31,4 +31,14 @@ inline float Rng_next(Rng *r) {
     return (float)(w >> 8) * (1.0f / 16777216.0f);
 }
 
+/* Point `index` of the R2 low-discrepancy sequence in [0, 1)^2, shifted by
+ * the random offset (ox, oy) in 32-bit fixed point (exact for any index).
+ * Consecutive indices fill the square evenly, so e.g. the samples of one
+ * pixel stratify its area for any sample count. */
+inline float2 Rng_r2(uint index, uint ox, uint oy) {
+    uint x = ox + index * 3242174889U; /* 2^32 / plastic number */
+    uint y = oy + index * 2447445414U; /* 2^32 / plastic number^2 */
+    return (float2)((float)(x >> 8), (float)(y >> 8)) * (1.0f / 16777216.0f);
+}
+
 #endif

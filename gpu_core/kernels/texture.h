@@ -12,9 +12,9 @@ inline float4 Texture_texel(const __global float4 *atlas, TextureInfo t, int x, 
 /* Bilinear sample at uv (v = 0 is the bottom row, as Blender stores images). */
 inline float4 Texture_sample(const __global float4 *atlas, const __global TextureInfo *infos, int id, float2 uv) {
     TextureInfo t = infos[id];
-    float fx = uv.x * t.width - 0.5f, fy = uv.y * t.height - 0.5f;
-    fx = fx - floor(fx / t.width) * t.width;
-    fy = fy - floor(fy / t.height) * t.height;
+    /* wrap uv into [0, 1) first, so huge coordinates stay in integer range */
+    float2 w = uv - floor(uv);
+    float fx = w.x * t.width - 0.5f, fy = w.y * t.height - 0.5f;
     int x0 = (int)floor(fx), y0 = (int)floor(fy);
     float ax = fx - x0, ay = fy - y0;
     float4 a = mix(Texture_texel(atlas, t, x0, y0), Texture_texel(atlas, t, x0 + 1, y0), ax);

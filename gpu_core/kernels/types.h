@@ -63,17 +63,22 @@ typedef struct {
 #define LIGHT_AREA 3
 #define LIGHT_MESH 4 /* emissive triangles, sampled as one light */
 
-/* A light row (96 bytes); see gpu_core/layout.py LIGHT_DTYPE. */
+/* A light row (128 bytes); see gpu_core/layout.py LIGHT_DTYPE. Derived
+ * values (radiance, normalisations) are computed on the host in float64. */
 typedef struct {
-    float4 position;  /* xyz; w = sphere radius (point, spot) */
-    float4 direction; /* xyz unit, where it points; w = cos of half spot angle */
-    float4 axis_u;    /* area: full size along X; w = 1/spot smooth width */
-    float4 axis_v;    /* area: full size along Y; w = cos of sun half angle */
-    float4 power;     /* rgb: watts (sun: W/m^2); w = area (area lights) */
+    float4 position;   /* xyz (sun: unused) */
+    float4 direction;  /* xyz unit: where it shines, the light's -Z */
+    float4 axis_u;     /* area: full size along the light's X */
+    float4 axis_v;     /* area: full size along the light's Y */
+    float4 power;      /* rgb: watts (sun: W/m^2) */
+    float4 radiance;   /* rgb radiance a ray sees on the light; 0 = not visible */
+    float radius;      /* point, spot: radius of the disk facing the receiver */
+    float cos_half;    /* spot: cos of half the cone; sun: cos of half the disk */
+    float spot_smooth; /* spot: 1 / ((1 - cos_half) * blend), smoothstep scale */
+    float sun_norm;    /* sun: 2 / (1 + cos_half), so the disk gives S at normal incidence */
     int kind;
     int shape; /* area: 0 rectangle, 1 ellipse */
-    float pick_pdf; /* probability of choosing this light */
-    int pad0;
+    int pad0, pad1;
 } Light;
 
 /* The camera (112 bytes); see gpu_core/layout.py CAMERA_DTYPE. */
