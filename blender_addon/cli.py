@@ -1,10 +1,11 @@
 """Command line: render a .blend with GPU GI through the bpy module.
 
     python -m blender_addon render FILE.blend -o OUT.png|OUT.exr [--frame N]
+        [--preset draft|preview|final|reference] [--mode reference|gi]
         [--samples N] [--resolution-percentage P] [--device SPEC]
 
-Prints the image's path and each stage's time; on an error, prints one line
-and exits non-zero.
+Prints the mode, the image's path and each stage's time; on an error, prints
+one line and exits non-zero. --samples applies after --preset.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+
+from gpu_core.settings import MODES, PRESETS
 
 # output extension -> Blender file format
 FORMATS = {".png": "PNG", ".exr": "OPEN_EXR", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}
@@ -28,6 +31,10 @@ def parse_args(argv):
     render.add_argument("blend", help=".blend file to render")
     render.add_argument("-o", "--output", required=True, help="image to write: " + ", ".join(FORMATS))
     render.add_argument("--frame", type=int, default=None, help="frame to render (default: the file's current frame)")
+    render.add_argument("--preset", choices=list(PRESETS), default=None,
+                        help="speed/accuracy step: samples, bounces and the GI knobs")
+    render.add_argument("--mode", choices=list(MODES), default=None,
+                        help="reference (path tracer) or gi (not built yet: falls back to reference with a warning)")
     render.add_argument("--samples", type=_positive, default=None, help="camera paths per pixel")
     render.add_argument("--resolution-percentage", type=_positive, default=None, help="scale of the file's resolution")
     render.add_argument("--device", default=None, help="OpenCL device: 'cpu', 'gpu', a platform name part or 'P:D'")
@@ -48,11 +55,12 @@ def main(argv=None) -> int:
     except CliError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
-    from .final import format_stage_times
+    from .status import format_stage_times, mode_line
 
     for warning in warnings:
         print(f"warning: {warning}")
     print(f"device: {stats.get('device', 'unknown')}")
+    print(f"mode: {mode_line(stats)}")
     print(f"stages: {format_stage_times(stats.get('ms', {}))}")
     print(f"image: {output}")
     return 0
@@ -82,6 +90,10 @@ def render_file(args) -> tuple[dict, list[str], str]:
     scene.render.engine = "GPUGI"
     if args.frame is not None:
         scene.frame_set(args.frame)
+    if args.preset is not None:
+        scene.gpugi.preset = args.preset.upper()
+    if args.mode is not None:
+        scene.gpugi.mode = args.mode.upper()
     if args.samples is not None:
         scene.gpugi.samples = args.samples
     if args.resolution_percentage is not None:

@@ -13,6 +13,7 @@ from gpu_core.errors import GpuGiError
 from .display import ViewportDrawer
 from .export import export_scene
 from .final import render_final
+from .passes import enabled_passes
 from .viewport import Job, ViewportSession, view_state
 
 
@@ -44,11 +45,9 @@ class GpuGiRenderEngine(bpy.types.RenderEngine):
         render_final(self, depsgraph)
 
     def update_render_passes(self, scene=None, renderlayer=None):
-        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
-        if renderlayer.use_pass_z:
-            self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")
-        if renderlayer.use_pass_normal:
-            self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", "VECTOR")
+        """Declare the passes the view layer's toggles ask for (the compositor's sockets)."""
+        for spec in enabled_passes(renderlayer):
+            self.register_pass(scene, renderlayer, spec.name, len(spec.channels), spec.channels, spec.kind)
 
     # -- viewport ---------------------------------------------------------------
 

@@ -15,6 +15,8 @@ from gpu_core.errors import GpuGiError, RenderCancelled
 from gpu_core.renderer import Renderer
 
 from .export import export_scene
+from .passes import enabled_passes, wants_denoising_passes, wants_light_passes
+from .status import format_stage_times, mode_line
 
 # What the last final render in this process did: the command line and the
 # tests read it ("stats", "warnings", "passes", "error", "cancelled").
@@ -43,13 +45,16 @@ def render_final(engine, depsgraph) -> None:
             engine.report({"WARNING"}, f"GPU GI: {warning}")
     LAST_RUN.update(stats=result.stats, warnings=result.warnings, passes=written, scene=scene.name)
     engine.update_memory_stats(memory_used=result.stats.get("device_bytes", 0) / 2**20)
-    engine.update_stats("", "GPU GI | " + format_stage_times(result.stats["ms"]))
+    engine.update_stats("", f"GPU GI | {mode_line(result.stats)} | " + format_stage_times(result.stats["ms"]))
 
 
 def _render(engine, depsgraph):
     """Export and render; the result's stats get the export and device stages."""
     scene = depsgraph.scene
     settings = scene.gpugi.render_settings(preview=engine.is_preview, transparent=scene.render.film_transparent)
+    if not engine.is_preview:
+        settings.light_passes = wants_light_passes(depsgraph.view_layer)
+        settings.denoising_passes = wants_denoising_passes(depsgraph.view_layer)
     engine.update_stats("", "GPU GI | exporting scene")
     started = time.perf_counter()
     gscene = export_scene(depsgraph, camera_object=engine.camera_override, should_stop=engine.test_break)
@@ -78,7 +83,7 @@ def write_passes(engine, passes: dict, view_layer) -> list[str]:
     """
     combined = passes["Combined"]
     height, width = combined.shape[:2]
-    wanted = {"Combined": True, "Depth": view_layer.use_pass_z, "Normal": view_layer.use_pass_normal}
+    wanted = {spec.name for spec in enabled_passes(view_layer)}
     written = []
     complete = False
     result = engine.begin_result(0, 0, width, height, layer=view_layer.name)
@@ -90,7 +95,7 @@ def write_passes(engine, passes: dict, view_layer) -> list[str]:
             )
         layer = result.layers[0]
         for name, pixels in passes.items():
-            target = layer.passes.find_by_name(name, "") if wanted.get(name) else None
+            target = layer.passes.find_by_name(name, "") if name in wanted else None
             if target is None:
                 continue
             flat = np.ascontiguousarray(pixels, np.float32).reshape(height * width, -1)
@@ -102,11 +107,6 @@ def write_passes(engine, passes: dict, view_layer) -> list[str]:
     finally:
         engine.end_result(result, cancel=not complete)
     return written
-
-
-def format_stage_times(ms: dict) -> str:
-    """'export 3 ms, kdtree 25 ms, ...' in the order the stages ran."""
-    return ", ".join(f"{name} {value:.0f} ms" for name, value in ms.items())
 
 
 def _fail(engine, message: str) -> None:

@@ -36,6 +36,19 @@ class GpuGiRenderPanel:
         return context.engine == ENGINE_ID
 
 
+class GPUGI_PT_mode(GpuGiRenderPanel, bpy.types.Panel):
+    bl_label = "Mode"
+
+    def draw(self, context):
+        settings = context.scene.gpugi
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "mode")
+        if settings.mode == "GI":
+            layout.label(text="GI is not built yet: the path tracer renders", icon="ERROR")
+        layout.prop(settings, "preset")
+
+
 class GPUGI_PT_sampling(GpuGiRenderPanel, bpy.types.Panel):
     bl_label = "Sampling"
 
@@ -61,6 +74,27 @@ class GPUGI_PT_light_paths(GpuGiRenderPanel, bpy.types.Panel):
         col.prop(context.scene.gpugi, "diffuse_bounces", text="Diffuse")
 
 
+class GPUGI_PT_global_illumination(GpuGiRenderPanel, bpy.types.Panel):
+    bl_label = "Global Illumination"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.gpugi
+        layout = self.layout
+        layout.use_property_split = True
+        layout.label(text="Used by the GI mode once it exists", icon="INFO")
+        col = layout.column(align=True)
+        col.prop(settings, "global_photons", text="Photons Global")
+        col.prop(settings, "caustic_photons", text="Caustic")
+        col.prop(settings, "photon_k")
+        col = layout.column(align=True)
+        col.prop(settings, "cache_seeds")
+        col.prop(settings, "gather_rays")
+        col = layout.column(align=True)
+        col.prop(settings, "cut_delta")
+        col.prop(settings, "cache_alpha")
+
+
 class GPUGI_PT_film(GpuGiRenderPanel, bpy.types.Panel):
     bl_label = "Film"
 
@@ -80,7 +114,40 @@ class GPUGI_PT_device(GpuGiRenderPanel, bpy.types.Panel):
         layout.prop(context.scene.gpugi, "device")
 
 
-PANELS = (GPUGI_PT_sampling, GPUGI_PT_light_paths, GPUGI_PT_film, GPUGI_PT_device)
+class GPUGI_PT_passes(bpy.types.Panel):
+    """The passes this engine writes, under View Layer Properties."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "view_layer"
+    bl_label = "Passes"
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine == ENGINE_ID
+
+    def draw(self, context):
+        view_layer = context.view_layer
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column(heading="Data", align=True)
+        col.prop(view_layer, "use_pass_combined")
+        col.prop(view_layer, "use_pass_z")
+        col.prop(view_layer, "use_pass_normal")
+        if hasattr(view_layer, "cycles"):  # the toggle belongs to the Cycles add-on
+            col.prop(view_layer.cycles, "denoising_store_passes", text="Denoising Data")
+        col = layout.column(heading="Light", align=True)
+        for kind in ("diffuse", "glossy", "transmission"):
+            row = col.row(heading=kind.capitalize(), align=True)
+            row.prop(view_layer, f"use_pass_{kind}_direct", text="Direct", toggle=True)
+            row.prop(view_layer, f"use_pass_{kind}_indirect", text="Indirect", toggle=True)
+        col.prop(view_layer, "use_pass_emit", text="Emission")
+        col.prop(view_layer, "use_pass_environment")
+        col.prop(view_layer.gpugi, "use_pass_caustics")
+
+
+PANELS = (GPUGI_PT_mode, GPUGI_PT_sampling, GPUGI_PT_light_paths, GPUGI_PT_global_illumination, GPUGI_PT_film,
+          GPUGI_PT_device, GPUGI_PT_passes)
 
 
 def stock_panels() -> list:

@@ -18,6 +18,7 @@ import numpy as np
 from gpu_core.errors import GpuGiError, RenderCancelled
 
 from .export.camera import view_camera
+from .status import mode_line
 
 COARSE_FACTOR = 4
 
@@ -137,7 +138,8 @@ class ViewportSession:
                 with self._lock:
                     self._image = result.passes["Combined"]
                     self._version += 1
-                self.status = f"GPU GI | {label}, {result.stats.get('triangles', 0)} triangles"
+                triangles = result.stats.get("triangles", 0)
+                self.status = f"GPU GI | {mode_line(result.stats)} | {label}, {triangles} triangles"
                 self._notify()
         except RenderCancelled:
             return

@@ -28,13 +28,22 @@ from .scene import (
     Scene,
     validate,
 )
-from .settings import RenderSettings
+from .settings import MODES_AVAILABLE, RenderSettings
 
 LIGHT_MESH = 4  # kernels/types.h: all emissive triangles as one light row
 _BATCH_SECONDS = 0.1  # aimed duration of one kernel launch (cancel latency)
 _FIRST_BATCH_PATHS = 1 << 14  # camera paths in the first launch, before any timing
 _MIN_BATCH = 64
 _RADIANCE_MAX = 1e30  # light radiance stays a finite float32
+
+# Light passes in the kernel's order (kernels/render.cl PASS_*), named as
+# Blender names them; all but Caustics add up to Combined.
+LIGHT_PASSES = (
+    "Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Glossy Indirect",
+    "Transmission Direct", "Transmission Indirect", "Emission", "Environment", "Caustics",
+)
+DENOISING_PASSES = ("Denoising Albedo", "Denoising Normal", "Denoising Depth")
+_OUTPUT_LIGHT_PASSES, _OUTPUT_DENOISING = 1, 2  # kernels/render.cl OUTPUT_*
 
 
 @dataclass
@@ -99,12 +108,13 @@ class Renderer:
         should_stop: Callable[[], bool] | None = None,
     ) -> RenderResult:
         settings = (settings or RenderSettings()).validated()
+        mode, mode_warning = _mode(settings)
         timer = _Timer()
         with timer.stage("validate"):
             scene = validate(scene)
         emit_tris, emit_cdf = _emissive_triangles(scene)
         plan, defines = _plan(scene, settings, len(emit_tris))
-        self._check_budget(scene)
+        self._check_budget(scene, settings)
         _check_stop(should_stop)
 
         # positions relative to the scene centre keep float32 precision far from the origin
@@ -122,6 +132,8 @@ class Renderer:
             passes, batches = self._run(program, up, scene, settings, progress, should_stop)
         stats = {
             "device": self.device.name,
+            "mode": mode,
+            "mode_requested": settings.mode,
             "plan": plan,
             "ms": timer.ms,
             "triangles": scene.triangle_count,
@@ -131,21 +143,21 @@ class Renderer:
             "batches": batches,
             "samples": settings.samples,
             "light_samples": settings.light_samples,
-            "device_bytes": _device_bytes(scene),
+            "device_bytes": _device_bytes(scene, settings),
             "kdtree": up.tree.stats,
             **scene.report.as_stats(),
         }
-        warnings = list(scene.warnings)
+        warnings = list(scene.warnings) + ([mode_warning] if mode_warning else [])
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
         return RenderResult(passes=passes, stats=stats, warnings=warnings)
 
     # -- upload ---------------------------------------------------------------
 
-    def _check_budget(self, scene: Scene) -> None:
+    def _check_budget(self, scene: Scene, settings: RenderSettings) -> None:
         """A clear error before any upload when the scene cannot fit the device."""
         dev = self.device
-        need = _device_bytes(scene)
+        need = _device_bytes(scene, settings)
         largest = max(scene.triangle_count * 48, _texels(scene) * 16)
         if need > dev.global_mem_bytes or largest > dev.max_alloc_bytes:
             raise BudgetError(
@@ -187,7 +199,11 @@ class Renderer:
         x0, y0, x1, y1 = scene.camera.pixel_window
         w, h = x1 - x0, y1 - y0
         total = w * h
+        outputs = _outputs(settings)
         combined, depth, normal = dev.empty(total * 16), dev.empty(total * 4), dev.empty(total * 16)
+        # passes nobody asked for get a one-element stand-in the kernel never writes
+        light = dev.empty(total * 16 * len(LIGHT_PASSES) if settings.light_passes else 16)
+        albedo, feature_normal = (dev.empty(total * 16 if settings.denoising_passes else 16) for _ in range(2))
         world = up.world.copy()
         world[3] = 1.0 if settings.transparent_background else 0.0
         kernel = cl.Kernel(program, "Render_pixels")
@@ -206,7 +222,7 @@ class Renderer:
                 np.array([w, h, count, start], np.int32), np.array([x0, y0], np.int32),
                 np.int32(settings.samples), np.int32(settings.max_bounces), np.int32(settings.diffuse_bounces),
                 np.int32(settings.light_samples), np.uint32(settings.seed), np.float32(settings.clamp),
-                combined, depth, normal,
+                np.int32(outputs), combined, depth, normal, light, albedo, feature_normal,
             )
             dev.queue.finish()
             elapsed = time.perf_counter() - began
@@ -218,17 +234,39 @@ class Renderer:
                 _check_stop(should_stop)
             scale = _BATCH_SECONDS / max(elapsed, 1e-4)
             batch = int(np.clip(count * min(scale, 4.0), _MIN_BATCH, settings.batch_pixels))
-        out_c = np.empty((total, 4), np.float32)
-        out_d = np.empty(total, np.float32)
-        out_n = np.empty((total, 4), np.float32)
-        for host, buf in ((out_c, combined), (out_d, depth), (out_n, normal)):
+
+        def read(buf, shape: tuple) -> np.ndarray:
+            host = np.empty(shape, np.float32)
             cl.enqueue_copy(dev.queue, host, buf)
-        passes = {
-            "Combined": out_c.reshape(h, w, 4),
-            "Depth": out_d.reshape(h, w, 1),
-            "Normal": np.ascontiguousarray(out_n.reshape(h, w, 4)[..., :3]),
-        }
+            return host
+
+        def rgb(buf) -> np.ndarray:
+            return np.ascontiguousarray(read(buf, (h, w, 4))[..., :3])
+
+        passes = {"Combined": read(combined, (h, w, 4)), "Depth": read(depth, (h, w, 1)), "Normal": rgb(normal)}
+        if settings.light_passes:
+            layers = read(light, (len(LIGHT_PASSES), h, w, 4))
+            passes.update((name, np.ascontiguousarray(layers[i, ..., :3])) for i, name in enumerate(LIGHT_PASSES))
+        if settings.denoising_passes:
+            passes["Denoising Albedo"] = rgb(albedo)
+            passes["Denoising Normal"] = rgb(feature_normal)
+            passes["Denoising Depth"] = passes["Depth"].copy()
         return passes, batches
+
+
+def _outputs(settings: RenderSettings) -> int:
+    """The kernel's output flags for the passes the settings ask for."""
+    light = _OUTPUT_LIGHT_PASSES if settings.light_passes else 0
+    return light | (_OUTPUT_DENOISING if settings.denoising_passes else 0)
+
+
+def _mode(settings: RenderSettings) -> tuple[str, str | None]:
+    """The mode that renders, and a warning when it is not the one asked for
+    (a mode not built yet falls back to the reference path tracer)."""
+    if settings.mode in MODES_AVAILABLE:
+        return settings.mode, None
+    return "reference", (f"render mode '{settings.mode}' (photon maps + irradiance cache) is not built yet; "
+                         "rendered with the reference path tracer instead")
 
 
 def _check_stop(should_stop) -> None:
@@ -254,17 +292,26 @@ def _plan(scene: Scene, settings: RenderSettings, emissive_count: int) -> tuple[
     if (m.alpha[used] < 1.0).any():
         plan.append("alpha_shadows")
         defines["RENDER_HAS_ALPHA"] = 1
+    if settings.light_passes:
+        plan.append("light_passes")
+    if settings.denoising_passes:
+        plan.append("denoising_passes")
     return plan, defines
 
 
-def _device_bytes(scene: Scene) -> int:
+def _device_bytes(scene: Scene, settings: RenderSettings) -> int:
     """Device memory the render needs, kd-tree nodes estimated."""
     n = scene.triangle_count
     x0, y0, x1, y1 = scene.camera.pixel_window
     geometry = n * (48 + 48 + 24 + 4)  # verts, normals, uvs, material ids
     tree = n * 4 * 8 + n * 16  # leaf references and nodes, a generous estimate
     textures = _texels(scene) * 16
-    film = (x1 - x0) * (y1 - y0) * 36
+    layers = 36  # combined, depth, normal: bytes per pixel
+    if settings.light_passes:
+        layers += 16 * len(LIGHT_PASSES)
+    if settings.denoising_passes:
+        layers += 32
+    film = (x1 - x0) * (y1 - y0) * layers
     return int(geometry + tree + textures + film + len(scene.lights) * LIGHT_DTYPE.itemsize)
 
 

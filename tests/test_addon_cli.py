@@ -74,3 +74,15 @@ def test_cli_errors_are_one_line_and_non_zero(small_blend, tmp_path):
     bad_format = _cli(small_blend, "-o", tmp_path / "x.gif")
     assert bad_format.returncode != 0 and "unsupported output extension" in bad_format.stderr
     assert not (tmp_path / "x.gif").exists()
+
+
+def test_cli_preset_and_mode_options(small_blend, tmp_path):
+    run = _cli(small_blend, "-o", tmp_path / "gi.png", "--preset", "draft", "--mode", "gi", "--samples", "1")
+    assert run.returncode == 0, run.stderr
+    assert "mode: gi not built yet, rendered as reference" in run.stdout
+    assert any(line.startswith("warning: render mode 'gi'") for line in run.stdout.splitlines())
+    plain = _cli(small_blend, "-o", tmp_path / "ref.png", "--preset", "draft")
+    assert plain.returncode == 0, plain.stderr
+    assert "mode: reference" in plain.stdout and "warning" not in plain.stdout
+    bad = _cli(small_blend, "-o", tmp_path / "x.png", "--preset", "ultra")
+    assert bad.returncode != 0 and "invalid choice" in bad.stderr

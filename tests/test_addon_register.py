@@ -134,6 +134,12 @@ class RecordingLayout:
     def column(self, **kwargs):
         return self
 
+    def row(self, **kwargs):
+        return self
+
+    def label(self, **kwargs):
+        pass
+
     def prop(self, data, name, **kwargs):
         assert name in data.bl_rna.properties, name
         self.drawn.append(name)
@@ -142,11 +148,18 @@ class RecordingLayout:
 def test_own_panels_draw_existing_settings(bpy_empty):
     from blender_addon.ui import PANELS
 
-    context = SimpleNamespace(scene=bpy_empty.context.scene, engine="GPUGI")
+    scene = bpy_empty.context.scene
+    scene.gpugi.mode = "GI"  # the Mode panel also draws its warning
+    context = SimpleNamespace(scene=scene, view_layer=scene.view_layers[0], engine="GPUGI")
     drawn = []
     for panel in PANELS:
         layout = RecordingLayout()
         panel.draw(SimpleNamespace(layout=layout), context)
         drawn += layout.drawn
-    assert {"samples", "preview_samples", "max_bounces", "diffuse_bounces", "clamp", "seed", "device",
-            "film_transparent"} <= set(drawn)
+    assert {"mode", "preset", "samples", "preview_samples", "max_bounces", "diffuse_bounces", "clamp", "seed",
+            "device", "film_transparent", "global_photons", "caustic_photons", "photon_k", "cache_seeds",
+            "gather_rays", "cut_delta", "cache_alpha"} <= set(drawn)
+    # the Passes panel: every toggle of a pass this engine writes
+    assert {"use_pass_z", "use_pass_normal", "use_pass_diffuse_direct", "use_pass_glossy_indirect",
+            "use_pass_transmission_direct", "use_pass_emit", "use_pass_environment", "use_pass_caustics",
+            "denoising_store_passes"} <= set(drawn)

@@ -1,5 +1,7 @@
-/* The image kernel: camera paths through mirrors and glass to diffuse
- * surfaces, which take direct light from every light with shadow rays. */
+/* The image kernel (the reference path tracer): camera paths through mirrors
+ * and glass to diffuse surfaces, which take direct light from every light
+ * with shadow rays and, with diffuse bounces, path-traced indirect light;
+ * the light is also split into Blender's light passes. */
 #include "types.h"
 #include "rng.h"
 #include "sampling.h"
@@ -108,9 +110,43 @@ inline float3 Render_lights_seen(const __global Light *lights, int light_count, 
     return sum;
 }
 
+/* Light passes, with Cycles' meaning: a path's light goes to the pass of
+ * the lobe its first scattering event took (diffuse, glossy = mirror and
+ * glass reflection, transmission = glass refraction), "direct" when it
+ * arrived after that one event and "indirect" after more; light seen before
+ * any scattering is Emission (surfaces) or Environment (the world). Passes
+ * 0..7 add up to Combined. Caustics repeats the part of them that reached a
+ * diffuse surface through specular events (light no shadow ray can sample). */
+#define PASS_DIFFUSE 0 /* +0 direct, +1 indirect */
+#define PASS_GLOSSY 2
+#define PASS_TRANSMISSION 4
+#define PASS_EMISSION 6
+#define PASS_ENVIRONMENT 7
+#define PASS_CAUSTICS 8
+#define PASS_SUMMED 8 /* passes before this one make up Combined */
+#define PASS_COUNT 9
+
+/* What the kernel writes besides Combined, Depth and Normal (flags). */
+#define OUTPUT_LIGHT_PASSES 1
+#define OUTPUT_DENOISING 2
+
+/* Add light c, which arrived after `events` scattering events, to its pass. */
+inline void Render_add(float3 *light, float3 c, int first_pass, int events, bool environment, bool caustic) {
+    int p = events == 0 ? (environment ? PASS_ENVIRONMENT : PASS_EMISSION) : first_pass + (events > 1 ? 1 : 0);
+    light[p] += c;
+    if (caustic) light[PASS_CAUSTICS] += c;
+}
+
+/* A direction in camera space (x right, y up, z back), as Cycles stores the
+ * denoising normal. */
+inline float3 Render_to_camera(const Camera *cam, float3 d) {
+    return (float3)(dot(d, cam->right.xyz), dot(d, cam->up.xyz), dot(d, cam->back.xyz));
+}
+
 /* One work item per pixel of the batch; all samples of the pixel.
  * window = (width, height, pixels in this batch, first pixel of the batch)
- * of the render window, whose lower-left pixel is window_origin. */
+ * of the render window, whose lower-left pixel is window_origin. Light
+ * passes are stored pass after pass, each the size of the window. */
 __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                             const __global float2 *tri_uvs, const __global int *tri_material,
                             const __global Material *materials, const __global Light *lights,
@@ -120,12 +156,14 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                             const __global Camera *camera_buf, const float4 world,
                             const int4 window, const int2 window_origin, const int samples, const int max_bounces,
                             const int max_diffuse, const int light_samples,
-                            const uint seed, const float clamp_value,
+                            const uint seed, const float clamp_value, const int outputs,
                             __global float4 *out_combined, __global float *out_depth,
-                            __global float4 *out_normal) {
+                            __global float4 *out_normal, __global float4 *out_light,
+                            __global float4 *out_albedo, __global float4 *out_feature_normal) {
     int i = get_global_id(0);
     int g = window.w + i; /* index in the render window */
-    if (i >= window.z || g >= window.x * window.y) return;
+    int window_pixels = window.x * window.y;
+    if (i >= window.z || g >= window_pixels) return;
     KdTree tree = KDTREE_MAKE();
     Emitters em = {emit_tris, emit_cdf, emit_count, kd_verts, tri_material, materials};
     Camera cam = *camera_buf;
@@ -134,10 +172,12 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
     float3 sky = world.xyz;
     bool transparent = world.w > 0.0f;
 
-    float3 total = (float3)(0.0f);
+    float3 pixel_light[PASS_COUNT];
+    for (int p = 0; p < PASS_COUNT; ++p) pixel_light[p] = (float3)(0.0f);
     float alpha_sum = 0.0f;
     float depth = 1e10f;
     float3 normal = (float3)(0.0f);
+    float3 albedo_sum = (float3)(0.0f), feature_normal_sum = (float3)(0.0f);
     /* anti-aliasing: the pixel's samples follow the R2 sequence from a
      * random offset, so they cover its area evenly */
     uint pixel_id = (uint)(py * cam.width + px);
@@ -150,22 +190,34 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
         float2 aa = Rng_r2((uint)s, aa_x, aa_y);
         Camera_ray(&cam, px + aa.x, py + aa.y, &org, &dir, &tmin, &tmax);
         float3 throughput = (float3)(1.0f);
-        float3 radiance = (float3)(0.0f);
+        float3 light[PASS_COUNT];
+        for (int p = 0; p < PASS_COUNT; ++p) light[p] = (float3)(0.0f);
         float alpha = 1.0f;
         int bounces = 0, diffuse = 0, passes = 0;
-        /* after a diffuse bounce, lights and the world were already sampled
-         * directly (next-event estimation): hitting them again is not counted */
+        int first_pass = PASS_DIFFUSE;
+        /* a specular event since the last diffuse one (and there was one) */
+        bool caustic = false;
+        /* the denoiser's albedo and normal: at the first diffuse event, or
+         * the world, seen through the specular events before it */
+        bool features_done = false;
         while (true) {
             Hit hit;
             bool found = KdTree_intersect(&tree, org, dir, tmin, tmax, &hit);
+            /* emitters hit by the path count unless a shadow ray already
+             * sampled them (next-event estimation at a diffuse event): before
+             * any diffuse event, or after specular events that followed one */
+            bool unsampled = diffuse == 0 || caustic;
             /* lights are see-through emitters: add those before the surface.
-             * As in Cycles by default, only specular rays see them, not the
-             * camera (and paths past a diffuse bounce sampled them already). */
-            if (bounces > 0 && diffuse == 0 && light_count > 0)
-                radiance += throughput * Render_lights_seen(lights, light_count, org, dir, found ? hit.t : tmax, !found);
+             * As in Cycles by default, only scattered rays see them, not the
+             * camera */
+            if (bounces > 0 && unsampled && light_count > 0) {
+                float3 seen = Render_lights_seen(lights, light_count, org, dir, found ? hit.t : tmax, !found);
+                Render_add(light, throughput * seen, first_pass, bounces, false, caustic);
+            }
             if (!found) {
                 if (bounces == 0 && passes == 0 && transparent) alpha = 0.0f;
-                else if (diffuse == 0) radiance += throughput * sky;
+                else if (unsampled) Render_add(light, throughput * sky, first_pass, bounces, true, caustic);
+                if (!features_done) albedo_sum += throughput;
                 break;
             }
             SurfacePoint sp = Render_surface(&tree, tri_normals, tri_uvs, tri_material, org, dir, &hit);
@@ -187,11 +239,18 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 depth = Camera_depth(&cam, sp.p);
                 normal = sp.ns;
             }
-            if (diffuse == 0) radiance += throughput * m.emission.xyz;
+            if (unsampled) Render_add(light, throughput * m.emission.xyz, first_pass, bounces, false, caustic);
             int lobe = Bsdf_pick(&m, Rng_next(&rng));
             if (lobe == BSDF_DIFFUSE) {
-                float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, &sp, light_samples, &rng);
-                radiance += throughput * base * (1.0f / PI_F) * e;
+                if (bounces == 0) first_pass = PASS_DIFFUSE;
+                if (!features_done) {
+                    albedo_sum += throughput * base;
+                    feature_normal_sum += Render_to_camera(&cam, sp.ns);
+                    features_done = true;
+                }
+                float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, &sp,
+                                         light_samples, &rng);
+                Render_add(light, throughput * base * (1.0f / PI_F) * e, first_pass, bounces + 1, false, false);
                 /* path-traced indirect light: cosine sampling cancels the
                  * Lambert cosine/pi, leaving the albedo; Russian roulette
                  * after two diffuse bounces keeps the estimate unbiased */
@@ -207,6 +266,7 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 org = sp.p + sp.eps * sp.ng;
                 tmin = 0.0f;
                 tmax = RAY_FAR;
+                caustic = false;
                 diffuse++;
                 bounces++;
                 continue;
@@ -222,18 +282,35 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 dir = Bsdf_glass(dir, sp.ns, sp.ng, entering, m.ior, Rng_next(&rng), &refracted);
                 if (refracted) throughput *= base;
             }
+            if (bounces == 0) first_pass = refracted ? PASS_TRANSMISSION : PASS_GLOSSY;
+            caustic = diffuse > 0;
             org = sp.p + (refracted ? -sp.eps : sp.eps) * sp.ng;
             tmin = 0.0f;
             tmax = RAY_FAR;
             bounces++;
         }
-        if (clamp_value > 0.0f) radiance = fmin(radiance, (float3)(clamp_value));
-        if (!(isfinite(radiance.x) && isfinite(radiance.y) && isfinite(radiance.z))) radiance = (float3)(0.0f);
-        total += radiance;
+        /* the clamp scales every pass of the sample alike, so they still
+         * add up to Combined; a non-finite sample is dropped */
+        float3 radiance = (float3)(0.0f);
+        for (int p = 0; p < PASS_SUMMED; ++p) radiance += light[p];
+        if (isfinite(radiance.x) && isfinite(radiance.y) && isfinite(radiance.z)) {
+            float3 scale = (float3)(1.0f);
+            if (clamp_value > 0.0f) scale = fmin(radiance, (float3)(clamp_value)) / fmax(radiance, (float3)(1e-30f));
+            for (int p = 0; p < PASS_COUNT; ++p) pixel_light[p] += light[p] * scale;
+        }
         alpha_sum += alpha;
     }
     float inv = 1.0f / (float)samples;
+    float3 total = (float3)(0.0f);
+    for (int p = 0; p < PASS_SUMMED; ++p) total += pixel_light[p];
     out_combined[g] = (float4)(total * inv, alpha_sum * inv);
     out_depth[g] = depth;
     out_normal[g] = (float4)(normal, 0.0f);
+    if (outputs & OUTPUT_LIGHT_PASSES) {
+        for (int p = 0; p < PASS_COUNT; ++p) out_light[p * window_pixels + g] = (float4)(pixel_light[p] * inv, 0.0f);
+    }
+    if (outputs & OUTPUT_DENOISING) {
+        out_albedo[g] = (float4)(albedo_sum * inv, 0.0f);
+        out_feature_normal[g] = (float4)(feature_normal_sum * inv, 0.0f);
+    }
 }

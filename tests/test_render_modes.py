@@ -1,0 +1,58 @@
+"""Render modes and the preset ladder."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scenes_py import camera_looking_down, plane_scene
+
+from gpu_core.renderer import Renderer
+from gpu_core.scene import LIGHT_POINT, Lights
+from gpu_core.settings import MODES, PRESETS, RenderSettings, preset
+
+LADDER = ("draft", "preview", "final", "reference")
+# knobs where a higher step costs more and gives less error
+GROWING = ("samples", "diffuse_bounces", "global_photons", "caustic_photons", "photon_k", "cache_seeds",
+           "gather_rays")
+
+
+def _scene():
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 2.0), power=(100.0,) * 3)])
+    return plane_scene(lights, camera_looking_down(size=8))
+
+
+def test_gi_mode_falls_back_to_the_path_tracer_and_says_so(device):
+    scene = _scene()
+    reference = Renderer(device).render(scene, RenderSettings(samples=2))
+    gi = Renderer(device).render(scene, RenderSettings(samples=2, mode="gi"))
+    assert reference.stats["mode"] == reference.stats["mode_requested"] == "reference"
+    assert not reference.warnings
+    assert (gi.stats["mode"], gi.stats["mode_requested"]) == ("reference", "gi")
+    assert any("not built yet" in w and "path tracer" in w for w in gi.warnings)
+    np.testing.assert_array_equal(gi.passes["Combined"], reference.passes["Combined"])
+
+
+def test_unknown_mode_is_validated_to_reference():
+    assert RenderSettings(mode="nonsense").validated().mode == "reference"
+    assert set(MODES) == {"reference", "gi"}
+
+
+def test_presets_form_a_ladder():
+    assert tuple(PRESETS) == LADDER
+    fields = {f.name for f in dataclasses.fields(RenderSettings)}
+    for name in LADDER:
+        assert set(PRESETS[name]) <= fields
+        assert set(GROWING) <= set(PRESETS[name])
+    for lower, higher in zip(LADDER, LADDER[1:]):
+        for knob in GROWING:
+            assert PRESETS[lower][knob] <= PRESETS[higher][knob], (lower, higher, knob)
+        assert PRESETS[lower]["cut_delta"] >= PRESETS[higher]["cut_delta"]  # a finer cut costs more
+    assert PRESETS["reference"]["diffuse_bounces"] >= 16  # the ground truth follows light far
+
+
+def test_preset_values_and_overrides():
+    final = preset("final", seed=7)
+    assert (final.samples, final.diffuse_bounces, final.seed) == (64, 4, 7)
+    assert final.validated() == final
+    with pytest.raises(KeyError):
+        preset("ultra")
