@@ -58,10 +58,14 @@ def set_world(scene, color, strength):
 # -- materials ----------------------------------------------------------------------
 
 
-def principled(name, color, metallic=0.0, roughness=0.5, transmission=0.0, ior=1.5, emission=None, strength=0.0):
-    """A Principled BSDF material with the inputs the exporter reads."""
+def principled(name, color, metallic=0.0, roughness=0.5, transmission=0.0, ior=1.5, emission=None, strength=0.0,
+               specular=0.5):
+    """A Principled BSDF material with the inputs the exporter reads;
+    ``specular`` is its Specular IOR Level (0: no dielectric reflection,
+    a Lambertian surface)."""
     mat = bpy.data.materials.new(name)
     node = mat.node_tree.nodes["Principled BSDF"]
+    node.inputs["Specular IOR Level"].default_value = specular
     node.inputs["Base Color"].default_value = (*color, 1.0)
     node.inputs["Metallic"].default_value = metallic
     node.inputs["Roughness"].default_value = roughness
@@ -156,9 +160,9 @@ def cornell_box():
     """The classic box, 2 m wide and open at the front: red and green side walls,
     an area light under the ceiling, a mirror sphere and a glass sphere."""
     reset("cornell_box")
-    white = principled("White", (0.73, 0.73, 0.73), roughness=1.0)
-    red = principled("Red", (0.63, 0.065, 0.05), roughness=1.0)
-    green = principled("Green", (0.14, 0.45, 0.091), roughness=1.0)
+    white = principled("White", (0.73, 0.73, 0.73), roughness=1.0, specular=0.0)
+    red = principled("Red", (0.63, 0.065, 0.05), roughness=1.0, specular=0.0)
+    green = principled("Green", (0.14, 0.45, 0.091), roughness=1.0, specular=0.0)
     plane(2, (0, 0, 0), mat=white, name="Floor")
     plane(2, (0, 0, 2), (math.pi, 0, 0), white, "Ceiling")
     plane(2, (0, 1, 1), (math.pi / 2, 0, 0), white, "Back")
@@ -176,8 +180,8 @@ def box_torus():
     """The seed's closed box (floor faces with their own material) around a
     gold mirror torus of 576 triangles, lit by one point light."""
     reset("box_torus")
-    walls = principled("Walls", (0.7, 0.7, 0.7), roughness=1.0)
-    floor = principled("Floor", (0.6, 0.5, 0.35), roughness=1.0)
+    walls = principled("Walls", (0.7, 0.7, 0.7), roughness=1.0, specular=0.0)
+    floor = principled("Floor", (0.6, 0.5, 0.35), roughness=1.0, specular=0.0)
     box = cube(2, (0, 0, 1), walls, name="Box")
     assign(box, walls, floor)
     # normals point into the box; the bottom face takes the second material

@@ -34,7 +34,7 @@ def parse_args(argv):
     render.add_argument("--preset", choices=list(PRESETS), default=None,
                         help="speed/accuracy step: samples, bounces and the GI knobs")
     render.add_argument("--mode", choices=list(MODES), default=None,
-                        help="reference (path tracer) or gi (not built yet: falls back to reference with a warning)")
+                        help="reference (path tracer) or gi (photon maps, irradiance cache, final gathering)")
     render.add_argument("--samples", type=_positive, default=None, help="camera paths per pixel")
     render.add_argument("--resolution-percentage", type=_positive, default=None, help="scale of the file's resolution")
     render.add_argument("--device", default=None, help="OpenCL device: 'cpu', 'gpu', a platform name part or 'P:D'")

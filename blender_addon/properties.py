@@ -6,7 +6,7 @@ import bpy
 
 from gpu_core.settings import PRESETS, RenderSettings
 
-_GI_ONLY = " (read by the GI mode once it exists; the reference path tracer ignores it)"
+_GI_ONLY = " (GI mode only)"
 
 # True while a preset writes its values, so those writes keep the preset
 _applying_preset = False
@@ -60,8 +60,8 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
         items=(
             ("REFERENCE", "Reference", "Path tracer: the ground truth, noisy until many samples; indirect light "
              "needs Diffuse Bounces above 0"),
-            ("GI", "GI (not built yet)", "Photon maps, irradiance cache and final gathering. Not built yet: "
-             "renders with the reference path tracer and reports a warning"),
+            ("GI", "GI", "Photon maps, irradiance cache and final gathering: direct light and mirrors/glass "
+             "traced, indirect light and caustics from photons; smooth at few samples"),
         ),
         default="REFERENCE",
     )
@@ -105,11 +105,12 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
 
     # global-illumination knobs (issue 5): stored now, consumed by the GI mode later
     global_photons: bpy.props.IntProperty(
-        name="Global Photons", description="Photons stored in the global photon map" + _GI_ONLY,
+        name="Global Photons", description="Photons emitted for the global photon map" + _GI_ONLY,
         default=RenderSettings.global_photons, min=0, soft_max=5_000_000, update=_mark_custom,
     )
     caustic_photons: bpy.props.IntProperty(
-        name="Caustic Photons", description="Photons stored in the caustic photon map" + _GI_ONLY,
+        name="Caustic Photons", description="Photons emitted for the caustic photon map (traced only when "
+        "the scene has mirrors or glass)" + _GI_ONLY,
         default=RenderSettings.caustic_photons, min=0, soft_max=5_000_000, update=_mark_custom,
     )
     photon_k: bpy.props.IntProperty(
@@ -126,8 +127,8 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
     )
     cut_delta: bpy.props.FloatProperty(
         name="Cut Threshold",
-        description="Illumination cut: a node is replaced by its children where its estimated irradiance is off "
-        "by more than this fraction (delta)" + _GI_ONLY,
+        description="Illumination cut: a node is replaced by its children where its approximate irradiance "
+        "differs from the exact one by more than this fraction of it (delta)" + _GI_ONLY,
         default=RenderSettings.cut_delta, min=0.0, soft_max=4.0, update=_mark_custom,
     )
     cache_alpha: bpy.props.FloatProperty(

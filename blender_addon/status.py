@@ -4,9 +4,8 @@ from __future__ import annotations
 
 
 def mode_line(stats: dict) -> str:
-    """The mode that rendered, and the one asked for when it fell back."""
-    mode, requested = stats.get("mode", "reference"), stats.get("mode_requested", "reference")
-    return mode if mode == requested else f"{requested} not built yet, rendered as {mode}"
+    """The mode that rendered."""
+    return stats.get("mode", "reference")
 
 
 def format_stage_times(ms: dict) -> str:

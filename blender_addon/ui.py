@@ -44,8 +44,6 @@ class GPUGI_PT_mode(GpuGiRenderPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(settings, "mode")
-        if settings.mode == "GI":
-            layout.label(text="GI is not built yet: the path tracer renders", icon="ERROR")
         layout.prop(settings, "preset")
 
 
@@ -82,7 +80,7 @@ class GPUGI_PT_global_illumination(GpuGiRenderPanel, bpy.types.Panel):
         settings = context.scene.gpugi
         layout = self.layout
         layout.use_property_split = True
-        layout.label(text="Used by the GI mode once it exists", icon="INFO")
+        layout.active = settings.mode == "GI"
         col = layout.column(align=True)
         col.prop(settings, "global_photons", text="Photons Global")
         col.prop(settings, "caustic_photons", text="Caustic")

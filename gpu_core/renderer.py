@@ -8,33 +8,23 @@ progress and asks whether to stop, so Esc in Blender takes effect quickly.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 import pyopencl as cl
 
-from . import kdtree
+from . import gi, kdtree, scene_tables
 from .device import Device
 from .errors import BudgetError, RenderCancelled
-from .layout import CAMERA_DTYPE, LIGHT_DTYPE, MATERIAL_DTYPE, TEXTURE_INFO_DTYPE
-from .scene import (
-    AREA_ELLIPSE,
-    CAMERA_ORTHO,
-    LIGHT_AREA,
-    LIGHT_POINT,
-    LIGHT_SPOT,
-    LIGHT_SUN,
-    Scene,
-    validate,
-)
-from .settings import MODES_AVAILABLE, RenderSettings
+from .layout import CAMERA_DTYPE, LIGHT_DTYPE
+from .scene import CAMERA_ORTHO, Scene, validate
+from .settings import RenderSettings
+from .shading_points import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION
 
-LIGHT_MESH = 4  # kernels/types.h: all emissive triangles as one light row
 _BATCH_SECONDS = 0.1  # aimed duration of one kernel launch (cancel latency)
 _FIRST_BATCH_PATHS = 1 << 14  # camera paths in the first launch, before any timing
 _MIN_BATCH = 64
-_RADIANCE_MAX = 1e30  # light radiance stays a finite float32
 
 # Light passes in the kernel's order (kernels/render.cl PASS_*), named as
 # Blender names them; all but Caustics add up to Combined.
@@ -99,6 +89,7 @@ class Renderer:
 
     def __init__(self, device: Device):
         self.device = device
+        self._photon_reuse = None  # gi.PhotonReuse, made by the first GI render
 
     def render(
         self,
@@ -108,11 +99,11 @@ class Renderer:
         should_stop: Callable[[], bool] | None = None,
     ) -> RenderResult:
         settings = (settings or RenderSettings()).validated()
-        mode, mode_warning = _mode(settings)
+        mode = settings.mode
         timer = _Timer()
         with timer.stage("validate"):
             scene = validate(scene)
-        emit_tris, emit_cdf = _emissive_triangles(scene)
+        emit_tris, emit_cdf = scene_tables.emissive_triangles(scene)
         plan, defines = _plan(scene, settings, len(emit_tris))
         self._check_budget(scene, settings)
         _check_stop(should_stop)
@@ -128,12 +119,19 @@ class Renderer:
         with timer.stage("compile"):
             program = self.device.program("render.cl", defines)
         _check_stop(should_stop)
+        # in GI mode the path tracer gives direct light and specular paths; the cache the rest
+        traced = replace(settings, diffuse_bounces=0) if mode == "gi" else settings
         with timer.stage("render"):
-            passes, batches = self._run(program, up, scene, settings, progress, should_stop)
+            passes, batches = self._run(program, up, scene, traced, progress, should_stop)
+        gi_stats = None
+        if mode == "gi":
+            _check_stop(should_stop)
+            if progress is not None:
+                progress(1.0, "global illumination")
+            gi_stats = self._add_gi(scene, up, settings, passes, timer, plan)
         stats = {
             "device": self.device.name,
             "mode": mode,
-            "mode_requested": settings.mode,
             "plan": plan,
             "ms": timer.ms,
             "triangles": scene.triangle_count,
@@ -147,10 +145,44 @@ class Renderer:
             "kdtree": up.tree.stats,
             **scene.report.as_stats(),
         }
-        warnings = list(scene.warnings) + ([mode_warning] if mode_warning else [])
+        if gi_stats is not None:
+            stats["gi"] = gi_stats
+        warnings = list(scene.warnings)
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
         return RenderResult(passes=passes, stats=stats, warnings=warnings)
+
+    def upload(self, scene: Scene) -> tuple[Scene, _Uploaded]:
+        """The validated scene and its device copy, kd-tree built, in the
+        kernels' frame (positions relative to the centre of the bounds):
+        what the stage kernels (shading points, gathering) read."""
+        scene = validate(scene)
+        lo, hi = scene.bounds()
+        center = 0.5 * (lo + hi)
+        tree = kdtree.build(self.device, (scene.triangles - center).astype(np.float32))
+        return scene, self._upload(scene, center, tree, *scene_tables.emissive_triangles(scene))
+
+    # -- global illumination ----------------------------------------------------
+
+    def _add_gi(self, scene: Scene, up: _Uploaded, settings: RenderSettings, passes: dict, timer: _Timer,
+                plan: list[str]) -> dict:
+        """Add indirect diffuse light and caustics from photon maps and the
+        irradiance cache (gi.py) to the traced passes; returns their stats."""
+        if self._photon_reuse is None:
+            self._photon_reuse = gi.PhotonReuse()
+        image = gi.render_gi(self.device, scene, up, scene.camera.pixel_window, settings, self._photon_reuse)
+        for stage, ms in image.stats["ms"].items():
+            timer.ms[stage] = ms
+        plan += gi.plan(image.stats)
+        passes["Combined"][..., :3] += image.indirect + image.caustics
+        if settings.light_passes:
+            # the light goes to the pass of the camera path's first lobe, as in the path tracer
+            indirect = image.indirect + image.caustics
+            for name, lobe in (("Glossy Indirect", LOBE_GLOSSY), ("Transmission Indirect", LOBE_TRANSMISSION)):
+                passes[name] += np.where((image.lobe == lobe)[..., None], indirect, 0.0)
+            passes["Diffuse Indirect"] += np.where((image.lobe == LOBE_DIFFUSE)[..., None], indirect, 0.0)
+            passes["Caustics"] += image.caustics
+        return {key: value for key, value in image.stats.items() if key != "ms"}
 
     # -- upload ---------------------------------------------------------------
 
@@ -158,7 +190,7 @@ class Renderer:
         """A clear error before any upload when the scene cannot fit the device."""
         dev = self.device
         need = _device_bytes(scene, settings)
-        largest = max(scene.triangle_count * 48, _texels(scene) * 16)
+        largest = max(scene.triangle_count * 48, scene_tables.texels(scene) * 16)
         if need > dev.global_mem_bytes or largest > dev.max_alloc_bytes:
             raise BudgetError(
                 f"the scene needs about {need / 2**20:.0f} MiB of device memory "
@@ -173,14 +205,14 @@ class Renderer:
         normals = np.zeros((scene.triangle_count * 3, 4), np.float32)
         normals[:, :3] = scene.normals.reshape(-1, 3)
         uvs = np.ascontiguousarray(scene.uvs.reshape(-1, 2), dtype=np.float32)
-        lights = _light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
-        atlas, infos = _texture_atlas(scene.textures)
+        lights = scene_tables.light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
+        atlas, infos = scene_tables.texture_atlas(scene.textures)
         return _Uploaded(
             tree=tree,
             normals=dev.buffer(normals),
             uvs=dev.buffer(uvs),
             material_ids=dev.buffer(scene.material_ids),
-            materials=dev.buffer(_material_table(scene)),
+            materials=dev.buffer(scene_tables.material_table(scene)),
             lights=dev.buffer(lights),
             light_count=len(lights),
             emit_tris=dev.buffer(emit_tris),
@@ -260,15 +292,6 @@ def _outputs(settings: RenderSettings) -> int:
     return light | (_OUTPUT_DENOISING if settings.denoising_passes else 0)
 
 
-def _mode(settings: RenderSettings) -> tuple[str, str | None]:
-    """The mode that renders, and a warning when it is not the one asked for
-    (a mode not built yet falls back to the reference path tracer)."""
-    if settings.mode in MODES_AVAILABLE:
-        return settings.mode, None
-    return "reference", (f"render mode '{settings.mode}' (photon maps + irradiance cache) is not built yet; "
-                         "rendered with the reference path tracer instead")
-
-
 def _check_stop(should_stop) -> None:
     if should_stop is not None and should_stop():
         raise RenderCancelled("render cancelled")
@@ -305,7 +328,7 @@ def _device_bytes(scene: Scene, settings: RenderSettings) -> int:
     x0, y0, x1, y1 = scene.camera.pixel_window
     geometry = n * (48 + 48 + 24 + 4)  # verts, normals, uvs, material ids
     tree = n * 4 * 8 + n * 16  # leaf references and nodes, a generous estimate
-    textures = _texels(scene) * 16
+    textures = scene_tables.texels(scene) * 16
     layers = 36  # combined, depth, normal: bytes per pixel
     if settings.light_passes:
         layers += 16 * len(LIGHT_PASSES)
@@ -313,135 +336,6 @@ def _device_bytes(scene: Scene, settings: RenderSettings) -> int:
         layers += 32
     film = (x1 - x0) * (y1 - y0) * layers
     return int(geometry + tree + textures + film + len(scene.lights) * LIGHT_DTYPE.itemsize)
-
-
-def _material_table(scene: Scene) -> np.ndarray:
-    m = scene.materials
-    table = np.zeros(len(m), MATERIAL_DTYPE)
-    table["base_color"][:, :3] = np.clip(np.nan_to_num(m.base_color), 0.0, 1.0)
-    table["base_color"][:, 3] = np.clip(np.nan_to_num(m.alpha, nan=1.0), 0.0, 1.0)
-    table["emission"][:, :3] = _emission(scene)
-    table["metallic"] = np.clip(np.nan_to_num(m.metallic), 0.0, 1.0)
-    table["roughness"] = np.clip(np.nan_to_num(m.roughness), 0.0, 1.0)
-    table["transmission"] = np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)
-    table["ior"] = np.clip(np.nan_to_num(m.ior, nan=1.5), 1e-3, 1e3)
-    table["texture"] = np.where(m.texture_id < len(scene.textures), m.texture_id, -1)
-    return table
-
-
-def _emission(scene: Scene) -> np.ndarray:
-    """Material emission radiance, finite and not negative."""
-    e = np.nan_to_num(np.asarray(scene.materials.emission, np.float64), nan=0.0, posinf=_RADIANCE_MAX)
-    return np.clip(e, 0.0, _RADIANCE_MAX).astype(np.float32)
-
-
-def _emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Emissive triangle ids and their inclusive CDF by power (luminance x area)."""
-    if scene.triangle_count == 0:
-        return np.zeros(0, np.int32), np.zeros(0, np.float32)
-    emission = _emission(scene).astype(np.float64)[scene.material_ids]
-    luminance = emission @ np.array([0.2126, 0.7152, 0.0722])
-    tris = scene.triangles
-    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-    power = luminance * area
-    ids = np.nonzero(power > 0)[0].astype(np.int32)
-    if ids.size == 0:
-        return ids, np.zeros(0, np.float32)
-    cdf = np.cumsum(power[ids])
-    cdf = (cdf / cdf[-1]).astype(np.float32)
-    cdf[-1] = 1.0
-    return ids, cdf
-
-
-def _light_table(scene: Scene, center: np.ndarray, has_mesh_lights: bool) -> np.ndarray:
-    """Device light rows in Cycles' units (see kernels/lights.h); emissive
-    meshes add one LIGHT_MESH row. Derived values are computed in float64."""
-    lights = scene.lights
-    n = len(lights)
-    table = np.zeros(n + (1 if has_mesh_lights else 0), LIGHT_DTYPE)
-    if has_mesh_lights:
-        table["kind"][n] = LIGHT_MESH
-    if not n:
-        return table
-    kind = lights.kind
-    power = _finite(lights.power)
-    direction = _finite(lights.direction)
-    length = np.linalg.norm(direction, axis=1, keepdims=True)
-    direction = np.where(length > 0, direction / np.where(length > 0, length, 1.0), [0.0, 0.0, -1.0])
-    axis_u, axis_v = _finite(lights.axis_u), _finite(lights.axis_v)
-    radius = np.maximum(_finite(lights.radius), 0.0)
-
-    # area lights: radiance P / (pi A), A of the rectangle or ellipse
-    area = np.linalg.norm(np.cross(axis_u, axis_v), axis=1)
-    area = np.where(lights.shape == AREA_ELLIPSE, area * np.pi / 4.0, area)
-    is_area = kind == LIGHT_AREA
-    power[is_area & ~(area > 0)] = 0.0  # a zero-size area light emits nothing
-    radiance = np.zeros_like(power)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        radiance[is_area] = power[is_area] / (np.pi * area[is_area, None])
-        # point and spot lights: a disk of radius r with radiance P / (4 pi^2 r^2)
-        disk = ((kind == LIGHT_POINT) | (kind == LIGHT_SPOT)) & (radius > 0)
-        radiance[disk] = power[disk] / (4.0 * np.pi**2 * radius[disk, None] ** 2)
-
-    # spot cone: cos of the half angle and the smoothstep scale of the blend
-    cos_half = np.ones(n)
-    spot = kind == LIGHT_SPOT
-    cos_spot = np.cos(0.5 * np.clip(_finite(lights.spot_angle), 0.0, np.pi))
-    cos_half[spot] = cos_spot[spot]
-    blend_width = (1.0 - cos_spot) * np.clip(_finite(lights.spot_blend), 0.0, 1.0)
-    spot_smooth = np.where(blend_width > 1e-12, 1.0 / np.maximum(blend_width, 1e-12), 1e30)
-
-    # sun: a disk of directions with radiance S / (pi sin^2(half angle))
-    sun = kind == LIGHT_SUN
-    half = 0.5 * np.clip(_finite(lights.sun_angle), 0.0, np.pi)
-    cos_half[sun] = np.cos(half[sun])
-    sun_disk = sun & (half > 0)
-    radiance[sun_disk] = power[sun_disk] / (np.pi * np.sin(half[sun_disk, None]) ** 2)
-    sun_norm = np.where(sun, 2.0 / (1.0 + cos_half), 1.0)
-
-    table["position"][:n, :3] = _finite(lights.position - center)
-    table["direction"][:n, :3] = direction
-    table["axis_u"][:n, :3] = axis_u
-    table["axis_v"][:n, :3] = axis_v
-    table["power"][:n, :3] = power
-    table["radiance"][:n, :3] = np.clip(np.nan_to_num(radiance, nan=0.0, posinf=_RADIANCE_MAX), 0.0, _RADIANCE_MAX)
-    table["radius"][:n] = radius
-    table["cos_half"][:n] = cos_half
-    table["spot_smooth"][:n] = spot_smooth
-    table["sun_norm"][:n] = sun_norm
-    table["kind"][:n] = kind
-    table["shape"][:n] = lights.shape
-    return table
-
-
-def _finite(values) -> np.ndarray:
-    """float64 copy with NaN and infinities replaced by 0."""
-    return np.nan_to_num(np.asarray(values, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-
-
-def _texels(scene: Scene) -> int:
-    """Texels of all textures: the atlas holds one float4 each."""
-    return sum(int(np.prod(np.shape(t)[:2])) for t in scene.textures)
-
-
-def _texture_atlas(textures: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """All textures in one float4 array, and each one's offset and size."""
-    infos = np.zeros(max(len(textures), 1), TEXTURE_INFO_DTYPE)
-    chunks, offset = [], 0
-    for i, tex in enumerate(textures):
-        img = np.asarray(tex, np.float32)
-        if img.ndim == 2:
-            img = img[..., None]
-        if img.shape[2] == 1:
-            img = np.concatenate([np.repeat(img, 3, axis=2), np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
-        if img.shape[2] == 3:
-            img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
-        img = np.nan_to_num(img[..., :4], nan=0.0, posinf=0.0, neginf=0.0)
-        infos[i] = (offset, img.shape[1], img.shape[0], 0)
-        chunks.append(img.reshape(-1, 4))
-        offset += img.shape[0] * img.shape[1]
-    atlas = np.concatenate(chunks) if chunks else np.zeros((1, 4), np.float32)
-    return np.ascontiguousarray(atlas, np.float32), infos
 
 
 def _camera_struct(scene: Scene, center: np.ndarray) -> np.ndarray:

@@ -6,10 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 # Render modes: "reference" is the path tracer (the in-house ground truth);
-# "gi" is photon maps + irradiance cache + final gathering, which is not
-# built yet: asking for it renders with the path tracer and says so.
+# "gi" traces direct light and specular paths and takes indirect diffuse
+# light from photon maps, the irradiance cache and final gathering.
 MODES = ("reference", "gi")
-MODES_AVAILABLE = ("reference",)
 
 
 @dataclass
@@ -28,10 +27,10 @@ class RenderSettings:
     light_passes: bool = False  # also return the light passes (renderer.LIGHT_PASSES)
     denoising_passes: bool = False  # also return Denoising Albedo, Normal and Depth
 
-    # Global-illumination knobs: read by the "gi" mode once it exists; the
-    # reference path tracer ignores them.
-    global_photons: int = 200_000  # photons stored in the global map
-    caustic_photons: int = 100_000  # photons stored in the caustic map
+    # Global-illumination knobs, read by the "gi" mode; the reference path
+    # tracer ignores them.
+    global_photons: int = 200_000  # photons emitted for the global map
+    caustic_photons: int = 100_000  # photons emitted for the caustic map (traced only with mirrors or glass)
     photon_k: int = 50  # nearest photons in one density estimate
     cache_seeds: int = 1600  # irradiance-cache sample points (k-means seeds)
     gather_rays: int = 256  # final-gather rays per sample point

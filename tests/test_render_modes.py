@@ -21,17 +21,6 @@ def _scene():
     return plane_scene(lights, camera_looking_down(size=8))
 
 
-def test_gi_mode_falls_back_to_the_path_tracer_and_says_so(device):
-    scene = _scene()
-    reference = Renderer(device).render(scene, RenderSettings(samples=2))
-    gi = Renderer(device).render(scene, RenderSettings(samples=2, mode="gi"))
-    assert reference.stats["mode"] == reference.stats["mode_requested"] == "reference"
-    assert not reference.warnings
-    assert (gi.stats["mode"], gi.stats["mode_requested"]) == ("reference", "gi")
-    assert any("not built yet" in w and "path tracer" in w for w in gi.warnings)
-    np.testing.assert_array_equal(gi.passes["Combined"], reference.passes["Combined"])
-
-
 def test_unknown_mode_is_validated_to_reference():
     assert RenderSettings(mode="nonsense").validated().mode == "reference"
     assert set(MODES) == {"reference", "gi"}

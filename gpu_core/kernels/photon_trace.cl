@@ -16,44 +16,12 @@
 #include "bsdf.h"
 #include "texture.h"
 #include "kdtree_traverse.h"
+#include "surface.h"
 #include "photon_emit.h"
 
 #define PHOTON_PASS_GLOBAL 0
 #define PHOTON_PASS_CAUSTIC 1
 #define PHOTON_MAX_PASSTHROUGH 64
-
-/* The surface at a hit (as Render_surface in render.cl). */
-typedef struct {
-    float3 p;      /* position */
-    float3 ng;     /* geometric normal facing the incoming photon */
-    float3 ns;     /* shading normal on the side of ng */
-    float3 ng_raw; /* geometric normal as wound */
-    float2 uv;
-    int material;
-    float eps;     /* offset for rays leaving this point */
-} PhotonSurface;
-
-inline PhotonSurface Photon_surface(const KdTree *tree, const __global float4 *tri_normals,
-                                    const __global float2 *tri_uvs, const __global int *tri_material,
-                                    float3 dir, const Hit *hit) {
-    PhotonSurface s;
-    int t = hit->tri;
-    float3 v0 = tree->verts[3 * t].xyz, v1 = tree->verts[3 * t + 1].xyz, v2 = tree->verts[3 * t + 2].xyz;
-    float w = 1.0f - hit->u - hit->v;
-    s.p = w * v0 + hit->u * v1 + hit->v * v2;
-    float3 cr = cross(v1 - v0, v2 - v0);
-    float len = length(cr);
-    s.ng_raw = len > 0.0f ? cr / len : (float3)(0.0f, 0.0f, 1.0f);
-    s.ng = dot(s.ng_raw, dir) > 0.0f ? -s.ng_raw : s.ng_raw;
-    float3 ns = w * tri_normals[3 * t].xyz + hit->u * tri_normals[3 * t + 1].xyz + hit->v * tri_normals[3 * t + 2].xyz;
-    float ls = length(ns);
-    ns = ls > 1e-20f ? ns / ls : s.ng;
-    s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
-    s.uv = w * tri_uvs[3 * t] + hit->u * tri_uvs[3 * t + 1] + hit->v * tri_uvs[3 * t + 2];
-    s.material = tri_material[t];
-    s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
-    return s;
-}
 
 /* Russian roulette by albedo: survive with probability max(albedo), the
  * survivor's power scaled by albedo / that probability. */
@@ -118,10 +86,9 @@ __kernel void Photon_trace(KDTREE_PARAMS, const __global float4 *tri_normals,
         Hit hit;
         if (!KdTree_intersect(&tree, org, dir, 0.0f, RAY_FAR, &hit)) break;
         hits++;
-        PhotonSurface sp = Photon_surface(&tree, tri_normals, tri_uvs, tri_material, dir, &hit);
+        SurfacePoint sp = Surface_at(&tree, tri_normals, tri_uvs, tri_material, dir, &hit);
         Material m = materials[sp.material];
-        float3 base = m.base_color.xyz;
-        if (m.texture >= 0) base *= Texture_sample(tex_atlas, tex_infos, m.texture, sp.uv).xyz;
+        float3 base = Surface_base(&m, tex_atlas, tex_infos, sp.uv);
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(&rng) >= m.base_color.w && passes < PHOTON_MAX_PASSTHROUGH) {
             passes++;

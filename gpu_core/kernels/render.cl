@@ -11,42 +11,9 @@
 #include "bsdf.h"
 #include "texture.h"
 #include "kdtree_traverse.h"
+#include "surface.h"
 
 #define RENDER_MAX_PASSTHROUGH 64
-
-/* What the kernel needs to know about the surface at a hit. */
-typedef struct {
-    float3 p;     /* position */
-    float3 ng;    /* geometric normal facing the incoming ray */
-    float3 ns;    /* shading normal on the same side as ng */
-    float3 ng_raw; /* geometric normal as wound */
-    float2 uv;
-    int material;
-    float eps;    /* offset for rays leaving this point */
-} SurfacePoint;
-
-inline SurfacePoint Render_surface(const KdTree *tree, const __global float4 *tri_normals,
-                                   const __global float2 *tri_uvs, const __global int *tri_material,
-                                   float3 org, float3 dir, const Hit *hit) {
-    SurfacePoint s;
-    int t = hit->tri;
-    float3 v0 = tree->verts[3 * t].xyz, v1 = tree->verts[3 * t + 1].xyz, v2 = tree->verts[3 * t + 2].xyz;
-    float w = 1.0f - hit->u - hit->v;
-    s.p = w * v0 + hit->u * v1 + hit->v * v2;
-    float3 cr = cross(v1 - v0, v2 - v0);
-    float len = length(cr);
-    s.ng_raw = len > 0.0f ? cr / len : (float3)(0.0f, 0.0f, 1.0f);
-    s.ng = dot(s.ng_raw, dir) > 0.0f ? -s.ng_raw : s.ng_raw;
-    float3 ns = w * tri_normals[3 * t].xyz + hit->u * tri_normals[3 * t + 1].xyz + hit->v * tri_normals[3 * t + 2].xyz;
-    float ls = length(ns);
-    ns = ls > 1e-20f ? ns / ls : s.ng;
-    s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
-    s.uv = w * tri_uvs[3 * t] + hit->u * tri_uvs[3 * t + 1] + hit->v * tri_uvs[3 * t + 2];
-    s.material = tri_material[t];
-    /* p is rounded like the largest vertex coordinate it was made from */
-    s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
-    return s;
-}
 
 /* Fraction of light passing along a shadow ray: 0 when an opaque surface
  * blocks it; with see-through (alpha) materials in the scene, the product of
@@ -220,7 +187,7 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 if (!features_done) albedo_sum += throughput;
                 break;
             }
-            SurfacePoint sp = Render_surface(&tree, tri_normals, tri_uvs, tri_material, org, dir, &hit);
+            SurfacePoint sp = Surface_at(&tree, tri_normals, tri_uvs, tri_material, dir, &hit);
             Material m = materials[sp.material];
             float3 base = m.base_color.xyz;
             float mat_alpha = m.base_color.w;

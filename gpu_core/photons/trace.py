@@ -24,7 +24,7 @@ import pyopencl.array as cla
 
 from .. import kdtree
 from ..device import Device
-from ..renderer import LIGHT_MESH, _emissive_triangles, _light_table, _material_table, _texture_atlas
+from ..scene_tables import LIGHT_MESH, emissive_triangles, light_table, material_table, texture_atlas
 from ..scene import LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN, Scene, validate
 from .kernels import Kernels
 from .layout import EMITTER_DTYPE
@@ -115,7 +115,7 @@ def _mesh_power(scene: Scene, emit_tris: np.ndarray) -> np.ndarray:
     """Both faces of every emissive triangle: sum of 2 pi A L_e."""
     tris = scene.triangles[emit_tris]
     area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-    emission = _material_table(scene)["emission"][:, :3].astype(np.float64)[scene.material_ids[emit_tris]]
+    emission = material_table(scene)["emission"][:, :3].astype(np.float64)[scene.material_ids[emit_tris]]
     return 2.0 * np.pi * (area[:, None] * emission).sum(axis=0)
 
 
@@ -179,8 +179,8 @@ def trace_photon_maps(
     lo, hi = scene.bounds()
     center = 0.5 * (lo + hi)
     radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)
-    emit_tris, emit_cdf = _emissive_triangles(scene)
-    table = _light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
+    emit_tris, emit_cdf = emissive_triangles(scene)
+    table = light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
     emitters = emitter_powers(scene, table, emit_tris, radius)
     light_power = sum((e.power for e in emitters), np.zeros(3))
     ms["setup"] = (time.perf_counter() - start) * 1e3
@@ -235,13 +235,13 @@ def _upload(device: Device, scene: Scene, tree: kdtree.KdTree, table: np.ndarray
     """What the trace kernel reads besides the triangle tree ``tree``."""
     normals = np.zeros((scene.triangle_count * 3, 4), np.float32)
     normals[:, :3] = scene.normals.reshape(-1, 3)
-    atlas, infos = _texture_atlas(scene.textures)
+    atlas, infos = texture_atlas(scene.textures)
     return _SceneBuffers(
         tree=tree,
         normals=device.buffer(normals),
         uvs=device.buffer(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),
         material_ids=device.buffer(scene.material_ids),
-        materials=device.buffer(_material_table(scene)),
+        materials=device.buffer(material_table(scene)),
         lights=device.buffer(table),
         emit_tris=device.buffer(emit_tris),
         emit_cdf=device.buffer(emit_cdf),

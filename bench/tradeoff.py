@@ -1,0 +1,176 @@
+"""Time against error: GPU GI's presets and knobs beside Cycles.
+
+For each scene, a high-sample Cycles render is the reference (cached in
+bench/results/). Then, in the same run: Cycles at 4..1024 samples with and
+without its denoiser, and GPU GI's presets and a sweep of its main knobs
+(photons, cache points, gather rays, k) from the Preview preset. Each
+configuration's render time (median of --repeats, the bpy render call
+including export) and relative RMSE against the reference (RMS of the
+per-pixel RGB difference over the reference's mean) go into a table and a
+log-log plot, bench/figures/tradeoff.png.
+
+    python bench/tradeoff.py [--scenes cornell_box box_torus caustics]
+        [--size 128] [--reference-samples 4096] [--repeats 3] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+
+import numpy as np
+
+from bpy_render import ROOT, load_bpy, machine, open_scene, render
+
+RESULTS = os.path.join(ROOT, "bench", "results")
+FIGURE = os.path.join(ROOT, "bench", "figures", "tradeoff.png")
+CYCLES_SAMPLES = (4, 16, 64, 256, 1024)
+PRESETS = ("DRAFT", "PREVIEW", "FINAL")
+SWEEPS = {  # knob -> values, each applied on top of the Preview preset
+    "global_photons": (25_000, 100_000, 400_000),
+    "cache_seeds": (250, 1000, 4000),
+    "gather_rays": (64, 256, 1024),
+    "photon_k": (20, 50, 100),
+}
+
+
+def relative_rmse(image: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.sqrt(((image - reference) ** 2).mean()) / max(reference.mean(), 1e-30))
+
+
+def cycles_settings(scene, samples: int, denoise: bool) -> None:
+    c = scene.cycles
+    c.device, c.samples = "CPU", samples
+    c.use_adaptive_sampling = False
+    c.use_denoising = denoise
+    c.seed = 0
+
+
+def reference(bpy, name: str, size: int, samples: int) -> np.ndarray:
+    """The scene rendered by Cycles at ``samples`` samples (cached)."""
+    path = os.path.join(RESULTS, f"reference_{name}_{size}_{samples}.npy")
+    if os.path.exists(path):
+        return np.load(path)
+    scene = open_scene(bpy, name, size)
+    cycles_settings(scene, samples, False)
+    image, seconds = render(bpy, scene, "CYCLES")
+    print(f"  reference: Cycles {samples} samples in {seconds:.1f} s")
+    os.makedirs(RESULTS, exist_ok=True)
+    np.save(path, image)
+    return image
+
+
+def timed(bpy, name, size, engine, configure, repeats) -> tuple[np.ndarray, float]:
+    """Median render time over ``repeats`` renders, and the last image."""
+    times = []
+    for _ in range(repeats):
+        scene = open_scene(bpy, name, size)
+        configure(scene)
+        image, seconds = render(bpy, scene, engine)
+        times.append(seconds)
+    return image, statistics.median(times)
+
+
+def ours(preset: str, **knobs):
+    def configure(scene):
+        scene.gpugi.mode = "GI"
+        scene.gpugi.preset = preset
+        for key, value in knobs.items():
+            setattr(scene.gpugi, key, value)
+    return configure
+
+
+def run_scene(bpy, name: str, args) -> list[dict]:
+    ref = reference(bpy, name, args.size, args.reference_samples)
+    rows = []
+    # a first render builds and caches the kernels; it is not timed
+    timed(bpy, name, args.size, "GPUGI", ours("DRAFT"), 1)
+    for samples in CYCLES_SAMPLES:
+        for denoise in (False, True):
+            repeats = args.repeats if samples <= 64 else 1
+            image, seconds = timed(bpy, name, args.size, "CYCLES",
+                                   lambda s: cycles_settings(s, samples, denoise), repeats)
+            rows.append(dict(scene=name, engine="Cycles" + (" denoised" if denoise else ""),
+                             config=f"{samples} spp", seconds=seconds, error=relative_rmse(image, ref)))
+    for preset in PRESETS:
+        image, seconds = timed(bpy, name, args.size, "GPUGI", ours(preset), args.repeats)
+        rows.append(dict(scene=name, engine="GPU GI preset", config=preset.title(), seconds=seconds,
+                         error=relative_rmse(image, ref)))
+    for knob, values in SWEEPS.items():
+        for value in values:
+            image, seconds = timed(bpy, name, args.size, "GPUGI", ours("PREVIEW", **{knob: value}), args.repeats)
+            rows.append(dict(scene=name, engine="GPU GI sweep", config=f"{knob}={value}", seconds=seconds,
+                             error=relative_rmse(image, ref)))
+    return rows
+
+
+def target(rows: list[dict]) -> str:
+    """The issue's target: Cycles' 64-sample error in a tenth of its time."""
+    c64 = next(r for r in rows if r["engine"] == "Cycles" and r["config"] == "64 spp")
+    good = [r for r in rows if r["engine"].startswith("GPU GI") and r["error"] <= c64["error"]]
+    if not good:
+        best = min((r for r in rows if r["engine"].startswith("GPU GI")), key=lambda r: r["error"])
+        return (f"no GPU GI configuration reaches Cycles 64 spp's error {c64['error']:.3f} "
+                f"(best {best['error']:.3f}, {best['config']}, {best['seconds']:.2f} s)")
+    fastest = min(good, key=lambda r: r["seconds"])
+    ratio = c64["seconds"] / fastest["seconds"]
+    verdict = "met" if ratio >= 10 else "missed"
+    return (f"Cycles 64 spp error {c64['error']:.3f} in {c64['seconds']:.2f} s; GPU GI reaches it with "
+            f"{fastest['config']} in {fastest['seconds']:.2f} s: {ratio:.1f}x faster (target 10x: {verdict})")
+
+
+def plot(rows: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = sorted({r["scene"] for r in rows})
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4.2), squeeze=False)
+    styles = {"Cycles": "o-", "Cycles denoised": "s--", "GPU GI preset": "D-", "GPU GI sweep": "x"}
+    for ax, name in zip(axes[0], scenes):
+        for engine, style in styles.items():
+            pts = sorted((r["seconds"], r["error"]) for r in rows if r["scene"] == name and r["engine"] == engine)
+            if pts:
+                ax.loglog(*zip(*pts), style, label=engine)
+        ax.set_title(name)
+        ax.set_xlabel("render time (s)")
+        ax.set_ylabel("relative RMSE vs Cycles reference")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenes", nargs="+", default=["cornell_box", "box_torus", "caustics"])
+    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--reference-samples", type=int, default=4096)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="64 px, 1024-sample reference, one repeat")
+    args = parser.parse_args()
+    if args.quick:
+        args.size, args.reference_samples, args.repeats = 64, 1024, 1
+    bpy = load_bpy()
+    print(f"machine: {machine()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp")
+    rows = []
+    for name in args.scenes:
+        print(f"{name}:")
+        scene_rows = run_scene(bpy, name, args)
+        for r in scene_rows:
+            print(f"  {r['engine']:16s} {r['config']:22s} {r['seconds']:8.2f} s   rel. RMSE {r['error']:.4f}")
+        print("  " + target(scene_rows))
+        rows += scene_rows
+    os.makedirs(RESULTS, exist_ok=True)
+    with open(os.path.join(RESULTS, "tradeoff.json"), "w") as f:
+        json.dump(rows, f, indent=1)
+    plot(rows, FIGURE)
+    print(f"plot: {FIGURE}")
+
+
+if __name__ == "__main__":
+    main()

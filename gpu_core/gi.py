@@ -1,0 +1,151 @@
+"""Indirect diffuse light and caustics of the image [WZPB09].
+
+Per render: photon maps (global, and caustic where the scene can make
+caustics); shading points (each pixel's first diffuse hit); irradiance
+sample points chosen among them (adaptive seeding + k-means); the
+illumination cut of the global photon tree; final gathering at the sample
+points through the cut; Ward interpolation to every shading point; caustics
+by density estimation of the caustic map at the shading points. The
+renderer adds direct light and specular paths, traced, to what this returns.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from . import cache, cut, gather, shading_points
+from .device import Device
+from .photons import PhotonMaps, trace_photon_maps
+from .scene import Lights, Materials, Scene
+from .settings import RenderSettings
+
+
+@dataclass
+class GiImage:
+    """Radiance per pixel of the render window, rows from the bottom."""
+
+    indirect: np.ndarray  # (H, W, 3) float32: indirect diffuse light
+    caustics: np.ndarray  # (H, W, 3) float32
+    lobe: np.ndarray  # (H, W) int32: each pixel's first camera lobe (shading_points.LOBE_*)
+    stats: dict = field(default_factory=dict)
+
+
+class PhotonReuse:
+    """The last photon maps traced, kept while neither the scene (geometry,
+    materials, lights, world) nor the photon settings change: a render that
+    only moves the camera does not trace photons again."""
+
+    def __init__(self):
+        self._key: bytes | None = None
+        self._maps: PhotonMaps | None = None
+
+    def maps(self, device: Device, scene: Scene, settings: RenderSettings, tree=None) -> tuple[PhotonMaps, bool]:
+        """The photon maps for ``scene`` (traced through ``tree``, its
+        triangle kd-tree in the renderer's frame, when given), and whether
+        they were reused."""
+        key = _photon_key(scene, settings)
+        if key == self._key and self._maps is not None:
+            return self._maps, True
+        self._maps = trace_photon_maps(device, scene, settings.global_photons, settings.caustic_photons,
+                                       seed=settings.seed, k_hint=settings.photon_k, triangle_tree=tree)
+        self._key = key
+        return self._maps, False
+
+
+def _photon_key(scene: Scene, settings: RenderSettings) -> bytes:
+    """A digest of everything photon tracing reads (not the camera)."""
+    digest = hashlib.blake2b(digest_size=16)
+    arrays = [scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.world_color, *scene.textures]
+    arrays += [getattr(scene.materials, f.name) for f in fields(Materials) if f.name != "names"]
+    arrays += [getattr(scene.lights, f.name) for f in fields(Lights) if f.name != "names"]
+    for array in arrays:
+        a = np.ascontiguousarray(array)
+        digest.update(str((a.dtype, a.shape)).encode())
+        digest.update(a.tobytes())
+    knobs = (settings.global_photons, settings.caustic_photons, settings.seed, settings.photon_k)
+    digest.update(repr(knobs).encode())
+    return digest.digest()
+
+
+def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int], settings: RenderSettings,
+              reuse: PhotonReuse | None = None) -> GiImage:
+    """Indirect light and caustics of the pixels in ``window`` for a
+    validated ``scene`` uploaded by the renderer (``up``, same centre);
+    ``reuse`` keeps photon maps from one render to the next."""
+    x0, y0, x1, y1 = window
+    w, h = x1 - x0, y1 - y0
+    ms: dict[str, float] = {}
+    stats: dict = {"ms": ms}
+
+    began = time.perf_counter()
+    maps, reused = (reuse or PhotonReuse()).maps(device, scene, settings, up.tree)
+    ms["photons"] = (time.perf_counter() - began) * 1e3
+    stats.update(photons=maps.stats, photons_reused=reused)
+
+    began = time.perf_counter()
+    points = shading_points.trace(device, up, window, settings.max_bounces)
+    ms["shading_points"] = (time.perf_counter() - began) * 1e3
+    stats["shading_points"] = len(points.positions)
+    irradiance = np.zeros((len(points.positions), 3), np.float32)
+    caustic = np.zeros_like(irradiance)
+
+    if maps.global_map is not None and len(points.positions):
+        began = time.perf_counter()
+        extent = float(np.ptp(points.positions, axis=0).max())
+        alpha = settings.cache_alpha / extent if extent > 0 else None
+        samples = cache.select_samples(device, points.positions, points.normals, points.pixels, w, h,
+                                       min(settings.cache_seeds, len(points.positions)), alpha=alpha,
+                                       seed=settings.seed)
+        ms["sample_points"] = (time.perf_counter() - began) * 1e3
+        began = time.perf_counter()
+        the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
+        ms["cut"] = (time.perf_counter() - began) * 1e3
+        gathered = gather.gather(device, up, samples.positions, samples.normals, _strata(settings.gather_rays),
+                                 the_cut.irradiance_at, seed=settings.seed)
+        ms["gather"] = gathered.stats["ms"]["total"]
+        began = time.perf_counter()
+        irradiance, interp = cache.interpolate(device, samples.positions, samples.normals, gathered.irradiance,
+                                               gathered.harmonic_distance, points.positions, points.normals)
+        ms["interpolate"] = (time.perf_counter() - began) * 1e3
+        stats.update(sample_points=len(samples.indices), cut=the_cut.stats, gather=gathered.stats,
+                     interpolation={k: v for k, v in interp.items() if k != "ms"})
+    if maps.caustic_map is not None and len(points.positions):
+        began = time.perf_counter()
+        caustic = maps.caustic_map.irradiance(points.positions, points.normals, settings.photon_k)
+        ms["caustics"] = (time.perf_counter() - began) * 1e3
+
+    lobe = np.zeros(w * h, np.int32)
+    lobe[np.nonzero(points.valid)[0]] = points.lobe
+    return GiImage(_image(points, irradiance, w, h), _image(points, caustic, w, h), lobe.reshape(h, w), stats)
+
+
+def plan(stats: dict) -> list[str]:
+    """The GI stages a render ran, for the renderer's plan: which photon maps
+    were traced (or reused), and the cache stages where there was light."""
+    maps = stats["photons"].get("maps", {})
+    stages = []
+    for name in ("global", "caustic"):
+        if str(maps.get(name, "")).startswith("built"):
+            stages.append(f"{name}_photons" + ("_reused" if stats["photons_reused"] else ""))
+    if "cut" in stats:
+        stages += ["sample_points", "illumination_cut", "final_gather", "interpolation"]
+    if "caustics" in stats["ms"]:
+        stages.append("caustics")
+    return stages
+
+
+def _strata(rays: int) -> int:
+    """Strata per side for about ``rays`` gather rays (strata² rays)."""
+    return max(1, int(round(np.sqrt(max(int(rays), 1)))))
+
+
+def _image(points: shading_points.ShadingPoints, irradiance: np.ndarray, w: int, h: int) -> np.ndarray:
+    """Pixel radiance: each shading point's factor times its irradiance."""
+    out = np.zeros((w * h, 3), np.float32)
+    radiance = points.factor * np.nan_to_num(irradiance, nan=0.0, posinf=0.0)
+    out[np.nonzero(points.valid)[0]] = np.clip(radiance, 0.0, None)
+    return out.reshape(h, w, 3)
