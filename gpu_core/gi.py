@@ -30,7 +30,7 @@ class GiImage:
 
     indirect: np.ndarray  # (H, W, 3) float32: indirect diffuse light
     caustics: np.ndarray  # (H, W, 3) float32
-    lobe: np.ndarray  # (H, W) int32: each pixel's first camera lobe (shading_points.LOBE_*)
+    by_lobe: np.ndarray  # (3, H, W, 3) float32: indirect + caustics by the camera path's first lobe (LOBE_*)
     stats: dict = field(default_factory=dict)
 
 
@@ -105,7 +105,7 @@ def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int
         the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
         ms["cut"] = (time.perf_counter() - began) * 1e3
         gathered = gather.gather(device, up, samples.positions, samples.normals, _strata(settings.gather_rays),
-                                 the_cut.irradiance_at, seed=settings.seed)
+                                 _irradiance_at(the_cut, maps.caustic_map, settings.photon_k), seed=settings.seed)
         ms["gather"] = gathered.stats["ms"]["total"]
         began = time.perf_counter()
         irradiance, interp = cache.interpolate(device, samples.positions, samples.normals, gathered.irradiance,
@@ -118,9 +118,21 @@ def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int
         caustic = maps.caustic_map.irradiance(points.positions, points.normals, settings.photon_k)
         ms["caustics"] = (time.perf_counter() - began) * 1e3
 
-    lobe = np.zeros(w * h, np.int32)
-    lobe[np.nonzero(points.valid)[0]] = points.lobe
-    return GiImage(_image(points, irradiance, w, h), _image(points, caustic, w, h), lobe.reshape(h, w), stats)
+    by_lobe = np.stack([_image(points, irradiance + caustic, w, h, points.lobe == lobe) for lobe in range(3)])
+    return GiImage(_image(points, irradiance, w, h), _image(points, caustic, w, h), by_lobe, stats)
+
+
+def _irradiance_at(the_cut: cut.Cut, caustic_map, k: int):
+    """Irradiance at gather hits: the global map's smooth light through its
+    cut, plus caustic light by density estimation of the caustic map (which
+    the global map leaves out where there is one: a cut would smear it)."""
+    if caustic_map is None:
+        return the_cut.irradiance_at
+
+    def both(points, normals):
+        return the_cut.irradiance_at(points, normals) + caustic_map.irradiance(points, normals, k)
+
+    return both
 
 
 def plan(stats: dict) -> list[str]:
@@ -143,9 +155,14 @@ def _strata(rays: int) -> int:
     return max(1, int(round(np.sqrt(max(int(rays), 1)))))
 
 
-def _image(points: shading_points.ShadingPoints, irradiance: np.ndarray, w: int, h: int) -> np.ndarray:
-    """Pixel radiance: each shading point's factor times its irradiance."""
-    out = np.zeros((w * h, 3), np.float32)
-    radiance = points.factor * np.nan_to_num(irradiance, nan=0.0, posinf=0.0)
-    out[np.nonzero(points.valid)[0]] = np.clip(radiance, 0.0, None)
-    return out.reshape(h, w, 3)
+def _image(points: shading_points.ShadingPoints, irradiance: np.ndarray, w: int, h: int,
+           which: np.ndarray | None = None) -> np.ndarray:
+    """Pixel radiance: the mean over a pixel's camera rays of each shading
+    point's factor times its irradiance (rays without a point add nothing);
+    only the points ``which`` when given."""
+    radiance = np.clip(points.factor * np.nan_to_num(irradiance, nan=0.0, posinf=0.0), 0.0, None)
+    if which is not None:
+        radiance = np.where(which[:, None], radiance, 0.0)
+    out = np.zeros((w * h, 3), np.float64)
+    np.add.at(out, points.pixel_index, radiance)
+    return (out / points.subpixels**2).astype(np.float32).reshape(h, w, 3)

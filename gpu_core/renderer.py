@@ -177,10 +177,9 @@ class Renderer:
         passes["Combined"][..., :3] += image.indirect + image.caustics
         if settings.light_passes:
             # the light goes to the pass of the camera path's first lobe, as in the path tracer
-            indirect = image.indirect + image.caustics
-            for name, lobe in (("Glossy Indirect", LOBE_GLOSSY), ("Transmission Indirect", LOBE_TRANSMISSION)):
-                passes[name] += np.where((image.lobe == lobe)[..., None], indirect, 0.0)
-            passes["Diffuse Indirect"] += np.where((image.lobe == LOBE_DIFFUSE)[..., None], indirect, 0.0)
+            for name, lobe in (("Diffuse Indirect", LOBE_DIFFUSE), ("Glossy Indirect", LOBE_GLOSSY),
+                               ("Transmission Indirect", LOBE_TRANSMISSION)):
+                passes[name] += image.by_lobe[lobe]
             passes["Caustics"] += image.caustics
         return {key: value for key, value in image.stats.items() if key != "ms"}
 

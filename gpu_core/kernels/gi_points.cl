@@ -1,6 +1,7 @@
-/* Shading points for the irradiance cache [WZPB09]: one camera ray per pixel
- * through its centre, followed through mirrors and glass (the likelier of
- * reflection and refraction) to the first surface with a diffuse lobe. */
+/* Shading points for the irradiance cache [WZPB09]: camera rays through a
+ * grid of sub-pixel positions (so pixels on an edge see both surfaces),
+ * followed through mirrors and glass (the likelier of reflection and
+ * refraction) to the first surface with a diffuse lobe. */
 #include "types.h"
 #include "sampling.h"
 #include "camera.h"
@@ -8,27 +9,35 @@
 #include "surface.h"
 
 #define GI_POINTS_MAX_PASSTHROUGH 64
+/* Points step back along the ray by this fraction of the scene's size: a
+ * point on the edge where two walls meet then lies off both, and its gather
+ * rays hit the other wall instead of slipping out past it. */
+#define GI_POINTS_PULL_BACK 1e-5f
 
 #define GI_LOBE_DIFFUSE 0 /* the camera sees the point directly */
 #define GI_LOBE_GLOSSY 1 /* through a mirror or a glass reflection first */
 #define GI_LOBE_TRANSMISSION 2 /* through a glass refraction first */
 
-/* Per pixel: position (w = 1 where a diffuse surface was found, else 0), shading
+/* Per point (sub-pixel s of pixel p is point p * sub^2 + s, sub positions
+ * row by row): position (w = 1 where a diffuse surface was found, else 0), shading
  * normal facing the camera path, and the factor from that surface's irradiance
  * to the pixel's radiance, throughput x diffuse weight x albedo / pi (w = the
  * camera path's first lobe, GI_LOBE_*, which picks the light pass). */
 __kernel void GiPoints_trace(KDTREE_PARAMS, SURFACE_PARAMS, const __global Camera *camera,
-                             const int4 window, const int max_bounces,
+                             const int4 window, const int sub, const int max_bounces,
                              __global float4 *out_pos, __global float4 *out_nrm,
                              __global float4 *out_factor) {
     int g = get_global_id(0);
     int w = window.z - window.x, h = window.w - window.y;
-    if (g >= w * h) return;
+    if (g >= w * h * sub * sub) return;
+    int pixel = g / (sub * sub), s = g % (sub * sub);
     KdTree tree = KDTREE_MAKE();
     Camera cam = camera[0];
     float3 org, dir;
     float tmin, tmax;
-    Camera_ray(&cam, window.x + g % w + 0.5f, window.y + g / w + 0.5f, &org, &dir, &tmin, &tmax);
+    Camera_ray(&cam, window.x + pixel % w + (s % sub + 0.5f) / sub, window.y + pixel / w + (s / sub + 0.5f) / sub,
+               &org, &dir, &tmin, &tmax);
+    float pull_back = GI_POINTS_PULL_BACK * length(tree.bmax - tree.bmin);
     float3 throughput = (float3)(1.0f);
     out_pos[g] = (float4)(0.0f);
     out_nrm[g] = (float4)(0.0f);
@@ -50,7 +59,7 @@ __kernel void GiPoints_trace(KDTREE_PARAMS, SURFACE_PARAMS, const __global Camer
         float3 base = Surface_base(&m, tex_atlas, tex_infos, sp.uv);
         float diffuse = Surface_diffuse_weight(&m);
         if (diffuse > 0.0f || bounces >= max_bounces) {
-            out_pos[g] = (float4)(sp.p, diffuse > 0.0f ? 1.0f : 0.0f);
+            out_pos[g] = (float4)(sp.p - pull_back * dir, diffuse > 0.0f ? 1.0f : 0.0f);
             out_nrm[g] = (float4)(sp.ns, 0.0f);
             out_factor[g] = (float4)(throughput * base * (diffuse / PI_F), (float)first_lobe);
             return;

@@ -2,10 +2,13 @@
  * photon. Scattering follows render.cl: stochastic alpha, then one lobe
  * by the Principled weights (mirror, smooth glass with Fresnel, Lambert);
  * Russian roulette by albedo keeps photon powers even; a bounce limit ends
- * long paths. Two passes use this kernel:
- *   global:  a photon is stored at every diffuse hit;
+ * long paths. Three passes use this kernel:
+ *   global:  a photon is stored at every diffuse hit but those of paths
+ *            light -> specular+ -> diffuse, which the caustic map holds;
  *   caustic: only paths light -> specular+ -> diffuse are followed, and the
- *            photon is stored at that diffuse hit.
+ *            photon is stored at that diffuse hit;
+ *   all:     a photon is stored at every diffuse hit (the global map of a
+ *            scene whose caustic map is not traced).
  * Stored photons go to slots taken from an atomic counter; those past the
  * capacity are counted but not written, so the host can retry larger. */
 #include "types.h"
@@ -21,6 +24,7 @@
 
 #define PHOTON_PASS_GLOBAL 0
 #define PHOTON_PASS_CAUSTIC 1
+#define PHOTON_PASS_ALL 2
 #define PHOTON_MAX_PASSTHROUGH 64
 
 /* Russian roulette by albedo: survive with probability max(albedo), the
@@ -97,7 +101,7 @@ __kernel void Photon_trace(KDTREE_PARAMS, const __global float4 *tri_normals,
         }
         int lobe = Bsdf_pick(&m, Rng_next(&rng));
         if (lobe == BSDF_DIFFUSE) {
-            if (pass == PHOTON_PASS_GLOBAL || caustic)
+            if (pass == PHOTON_PASS_ALL || (pass == PHOTON_PASS_GLOBAL) != caustic)
                 Photon_store(sp.p, -dir, power, sp.ns, counter, capacity, out_pos, out_dir, out_power, out_normal);
             if (pass == PHOTON_PASS_CAUSTIC || bounces >= max_bounces) break;
             if (!Photon_roulette(base, &power, &rng)) break;

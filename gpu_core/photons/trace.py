@@ -3,7 +3,9 @@
 ``trace_photon_maps(device, scene, global_photons, caustic_photons, seed)``
 emits photons from every light, emissive triangle and an emitting world, in
 proportion to power, traces them through the triangle kd-tree and builds
-one point kd-tree per map. Photon power is in watts: the photons of a pass
+one point kd-tree per map: the caustic map holds the photons of paths
+light -> specular+ -> diffuse, and the global map every other diffuse hit
+(all of them when the caustic map is not traced). Photon power is in watts: the photons of a pass
 carry, all together, the power the lights emit (Cycles' units, see
 kernels/lights.h and kernels/photon_emit.h). Only the maps the scene needs
 are traced; ``stats["maps"]`` says which were built and why.
@@ -31,7 +33,7 @@ from .layout import EMITTER_DTYPE
 from .point_tree import PointTree
 from .point_tree_build import GROUP
 
-PASS_GLOBAL, PASS_CAUSTIC = 0, 1  # kernels/photon_trace.cl
+PASS_GLOBAL, PASS_CAUSTIC, PASS_ALL = 0, 1, 2  # kernels/photon_trace.cl
 EMITTER_WORLD = -1  # kernels/photon_emit.h
 _STORE_GUESS = 3  # stored photons per emitted one, first guess of the global buffer
 
@@ -212,7 +214,8 @@ def trace_photon_maps(
             continue
         count = global_photons if name == "global" else caustic_photons
         rows = allocate(emitters, count)
-        pass_id = PASS_GLOBAL if name == "global" else PASS_CAUSTIC
+        # with a caustic map, the global map leaves its photons out (kernels/photon_trace.cl)
+        pass_id = PASS_CAUSTIC if name == "caustic" else PASS_GLOBAL if "caustic" in traced else PASS_ALL
         start = time.perf_counter()
         stored, n_stored, asked, path = _trace(device, buffers, rows, radius, seed, pass_id, max_bounces)
         ms[f"trace_{name}"] = (time.perf_counter() - start) * 1e3
