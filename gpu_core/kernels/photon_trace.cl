@@ -77,7 +77,7 @@ __kernel void Photon_trace(KDTREE_PARAMS, const __global float4 *tri_normals,
     if (i >= n_photons) return;
     KdTree tree = KDTREE_MAKE();
     Emitters em = {emit_tris, emit_cdf, emit_count, kd_verts, tri_material, materials};
-    Rng rng = Rng_make((uint)i, (uint)pass, seed);
+    Rng rng = Rng_make((uint)i, pass == PHOTON_PASS_CAUSTIC ? 1u : 0u, seed); /* one stream per map */
     PhotonEmitter e = emitters[Photon_emitter(emitters, n_emitters, i)];
     PhotonRay ray = PhotonEmit(&e, lights, &em, sphere, i - e.first, &rng);
     float3 org = ray.org, dir = ray.dir, power = ray.power;

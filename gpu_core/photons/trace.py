@@ -265,7 +265,7 @@ def _trace(device: Device, buf: _SceneBuffers, rows: np.ndarray, radius: float, 
     queue = device.queue
     kernel = Kernels(device.program("photon_trace.cl")).Photon_trace
     n = int(rows["count"].sum())
-    capacity = max(n * (_STORE_GUESS if pass_id == PASS_GLOBAL else 1), 1)
+    capacity = max(n * (1 if pass_id == PASS_CAUSTIC else _STORE_GUESS), 1)
     path = cla.empty(queue, (max(n, 1), 4), np.float32)
     counter = cla.empty(queue, 1, np.int32)
     emitter_buf = device.buffer(rows)
