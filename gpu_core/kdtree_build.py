@@ -7,8 +7,9 @@ counts (scan totals) to size the next level's arrays:
   median split, triangles clipped to the children, counts and compaction
   by prefix sums; children with at most ``SMALL`` triangles become small roots;
 * small-node stage: candidate planes and their 64-bit side masks per small
-  root, the SAH of every candidate of every node in parallel, a leaf where
-  not splitting is cheaper;
+  root, the SAH of every candidate of every node (a work-item per node on a
+  CPU, a work-group per node elsewhere), a leaf where not splitting is
+  cheaper;
 * output stage: subtree sizes bottom-up, preorder addresses top-down, then
   the ``KdNode`` array of ``kernels/types.h`` and the leaf triangle lists.
 """
@@ -33,7 +34,7 @@ SMALL = 64  # largest small node (the width of its element mask)
 EMPTY_RATIO = 0.25  # empty fraction of a side that is cut off
 COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests
 MAX_DEPTH = 64  # kernels/kdtree_traverse.h KD_MAX_DEPTH (the traversal stack)
-SAH_GROUP = 64  # work-group size of the per-node SAH search
+SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
 LEAF = 3
 
@@ -59,8 +60,16 @@ class BuildOutput:
 class _Kernels:
     """The build program and the scan / reduction primitives, per device."""
 
-    def __init__(self, device: Device):
+    def __init__(self, device: Device, sah_lanes: int | None):
         ctx = device.context
+        max_group = int(device.device.max_work_group_size)
+        self.chunk_group = 1 << int(math.log2(min(CHUNK, max_group)))
+        self.sah_group = 1 << int(math.log2(min(SAH_GROUP, max_group)))
+        # a CPU runs a node's candidates best in one work-item (no barriers);
+        # other devices spread them over a work-group
+        if sah_lanes is None:
+            sah_lanes = 1 if device.device.type & cl.device_type.CPU else self.sah_group
+        self.sah_lanes = min(sah_lanes, self.sah_group)
         self.program = device.program(
             "kdtree_build.cl",
             {
@@ -68,6 +77,8 @@ class _Kernels:
                 "KD_SMALL": SMALL,
                 "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
                 "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f",
+                "KD_SAH_GROUP": self.sah_group,
+                "KD_SAH_LANES": self.sah_lanes,
             },
         )
         self.kernel = {kernel.function_name: kernel for kernel in self.program.all_kernels()}
@@ -121,18 +132,15 @@ class _Kernels:
             "    : (int4)(0, 0, 0, info[i].w))",
             arguments="__global const int4 *info",
         )
-        max_group = int(device.device.max_work_group_size)
-        self.chunk_group = 1 << int(math.log2(min(CHUNK, max_group)))
-        self.sah_group = 1 << int(math.log2(min(SAH_GROUP, max_group)))
 
 
-_KERNELS: dict[int, _Kernels] = {}
+_KERNELS: dict[tuple[int, int | None], _Kernels] = {}
 
 
-def _kernels(device: Device) -> _Kernels:
-    key = id(device)
+def _kernels(device: Device, sah_lanes: int | None = None) -> _Kernels:
+    key = (id(device), sah_lanes)
     if key not in _KERNELS:
-        _KERNELS[key] = _Kernels(device)
+        _KERNELS[key] = _Kernels(device, sah_lanes)
     return _KERNELS[key]
 
 
@@ -179,9 +187,14 @@ class _Stages:
         self._start = now
 
 
-def build_tree(device: Device, verts: cla.Array, count: int) -> BuildOutput:
-    """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each)."""
-    k = _kernels(device)
+def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None) -> BuildOutput:
+    """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
+
+    ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
+    per node of the SAH search; by default 1 on a CPU, else ``SAH_GROUP``.
+    The tree is the same whatever it is.
+    """
+    k = _kernels(device, sah_lanes)
     q = device.queue
     kern = k.kernel
     i32 = np.int32
@@ -216,6 +229,7 @@ def build_tree(device: Device, verts: cla.Array, count: int) -> BuildOutput:
     sel_lo = _Growing(q, cltypes.float4, 2 * count + 1)
     sel_hi = _Growing(q, cltypes.float4, 2 * count + 1)
     root_count = small_count = 0
+    large_levels = small_levels = 0
 
     el_tri = _empty(q, count, np.int32)
     el_lo = _empty(q, count, cltypes.float4)
@@ -243,6 +257,7 @@ def build_tree(device: Device, verts: cla.Array, count: int) -> BuildOutput:
         total_l = _empty(q, 1, np.int64)
         total_8 = _empty(q, 1, cltypes.int8)
         while active:
+            large_levels += 1
             a_, e_ = (active,), (elements,)
             chunk_base = _empty(q, active, np.int32)
             k.chunk_scan(act_info, chunk_base, total_i, i32(active), size=active, queue=q)
@@ -322,7 +337,7 @@ def build_tree(device: Device, verts: cla.Array, count: int) -> BuildOutput:
     stages.end("large")
 
     if root_count:
-        rec_count, leaf_count = _small_stage(
+        rec_count, leaf_count, small_levels = _small_stage(
             k, q, max_depth, root_count, small_count, small_roots, sel_tri, sel_lo, sel_hi,
             rec_lo, rec_hi, rec_info, rec_split, rec_count, leaf_tris, leaf_count, batches,
         )
@@ -341,6 +356,7 @@ def build_tree(device: Device, verts: cla.Array, count: int) -> BuildOutput:
     stages.end("output")
 
     stats = _statistics(k, q, rec_info.array, rec_lo.array, rec_hi.array, rec_count, lo, hi)
+    stats.update(large_levels=large_levels, small_roots=root_count, small_levels=small_levels)
     stats["ms"] = stages.ms
     bmin = (lo - eps).astype(np.float32)
     bmax = (hi + eps).astype(np.float32)
@@ -350,7 +366,9 @@ def build_tree(device: Device, verts: cla.Array, count: int) -> BuildOutput:
 
 def _small_stage(k, q, max_depth, root_count, small_count, small_roots, sel_tri, sel_lo, sel_hi,
                  rec_lo, rec_hi, rec_info, rec_split, rec_count, leaf_tris, leaf_count, batches):
-    """Split every small root down to its leaves by the SAH, level by level."""
+    """Split every small root down to its leaves by the SAH, level by level.
+
+    Returns the record and leaf-triangle counts and the number of levels."""
     kern = k.kernel
     i32 = np.int32
     sel_root = _empty(q, small_count, np.int32)
@@ -365,13 +383,15 @@ def _small_stage(k, q, max_depth, root_count, small_count, small_roots, sel_tri,
         i32(6 * small_count), cand.data,
     )
     total = _empty(q, 1, np.int64)
-    active = root_count
+    active, levels = root_count, 0
     while active:
+        levels += 1
         best = _empty(q, active, np.int32)
+        groups = -(-active * k.sah_lanes // k.sah_group)
         kern["KdBuild_small_best"](
-            q, (active * k.sah_group,), (k.sah_group,), sn_node.data, sn_mask.data, small_roots.data,
+            q, (groups * k.sah_group,), (k.sah_group,), sn_node.data, sn_mask.data, small_roots.data,
             rec_lo.data, rec_hi.data, rec_info.data, sel_lo.data, sel_hi.data, cand.data,
-            i32(max_depth), best.data,
+            i32(active), i32(max_depth), best.data,
         )
         rank = _empty(q, active, np.int64)
         k.rank_scan(best, sn_mask, rank, total, i32(active), size=active, queue=q)
@@ -392,7 +412,7 @@ def _small_stage(k, q, max_depth, root_count, small_count, small_roots, sel_tri,
         rec_count += 2 * splits
         leaf_count += leaf_new
         sn_node, sn_mask, active = next_node, next_mask, 2 * splits
-    return rec_count, leaf_count
+    return rec_count, leaf_count, levels
 
 
 def _statistics(k, q, info, lo_arr, hi_arr, n, lo, hi) -> dict:

@@ -15,7 +15,9 @@
  * Defines from the host: KD_CHUNK (elements per chunk, a power of two),
  * KD_SMALL (largest small node, at most 64), KD_EMPTY_RATIO (empty-space
  * cut threshold), KD_COST_TRAVERSE (SAH cost of a node step, in triangle
- * tests). */
+ * tests), KD_SAH_GROUP (work-group size of the SAH search) and
+ * KD_SAH_LANES (its work-items per node, a power of two dividing
+ * KD_SAH_GROUP). */
 #include "types.h"
 #include "kdtree_clip.h"
 
@@ -438,12 +440,40 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
     cand[c] = (ulong2)(below, above);
 }
 
-/* Per small node (one work-group each, every candidate in parallel): the
- * candidate inside the node's cell with the lowest SAH
+/* SAH cost of candidate c (of the small root's element k) for a node with
+ * element mask `mask` and cell [lo, hi]; kept in *best_cost / *best_cand
+ * when lower. Planes outside the open cell are skipped. */
+inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
+                             float4 hi, float area,
+                             const __global float4 *sel_lo,
+                             const __global float4 *sel_hi,
+                             const __global ulong2 *cand, float *best_cost,
+                             int *best_cand) {
+    int axis = (c % 6) >> 1;
+    float plane = KdClip_axis((c & 1) ? sel_hi[root.x + k] : sel_lo[root.x + k], axis);
+    if (!(KdClip_axis(lo, axis) < plane && plane < KdClip_axis(hi, axis))) return;
+    ulong2 m = cand[6 * root.x + c];
+    float below = (float)popcount(m.x & mask);
+    float above = (float)popcount(m.y & mask);
+    float cost = KD_COST_TRAVERSE +
+                 (below * KdBuild_area(lo, KdClip_with(hi, axis, plane)) +
+                  above * KdBuild_area(KdClip_with(lo, axis, plane), hi)) / area;
+    if (cost < *best_cost) {
+        *best_cost = cost;
+        *best_cand = c;
+    }
+}
+
+/* Per small node (KD_SAH_LANES work-items each, sharing its candidates):
+ * the candidate inside the node's cell with the lowest SAH
  *   C_t + (N_below A_below + N_above A_above) / A,
  * counts by popcount of the candidate's masks and the node's mask. best is
  * the candidate, or -1 where a leaf (cost: its triangle count) is cheaper
- * or the depth limit is reached. */
+ * or the depth limit is reached; a node of at most C_t triangles is a leaf
+ * at once, as no split costs less than C_t. Ties go to the lowest
+ * candidate, so the choice does not depend on the lane count. The global
+ * size is a multiple of the work-group size, itself a multiple of
+ * KD_SAH_LANES. */
 __kernel void KdBuild_small_best(const __global int2 *sn_node,
                                  const __global ulong *sn_mask,
                                  const __global int4 *small_roots,
@@ -452,43 +482,48 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
                                  const __global int4 *rec_info,
                                  const __global float4 *sel_lo,
                                  const __global float4 *sel_hi,
-                                 const __global ulong2 *cand,
+                                 const __global ulong2 *cand, const int n,
                                  const int max_depth, __global int *best) {
-    __local float cost_s[64];
-    __local int cand_s[64];
-    int i = get_group_id(0), lid = get_local_id(0), size = get_local_size(0);
-    int2 node = sn_node[i];
-    ulong mask = sn_mask[i];
-    int4 root = small_roots[node.x];
-    float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
-    float area = KdBuild_area(lo, hi);
-    float leaf_cost = (float)popcount(mask);
+    __local float cost_s[KD_SAH_GROUP];
+    __local int cand_s[KD_SAH_GROUP];
+    int i = get_global_id(0) / KD_SAH_LANES, lane = get_global_id(0) % KD_SAH_LANES;
+    int lid = get_local_id(0);
     float my_cost = INFINITY;
     int my_cand = -1;
-    if (rec_info[node.y].w < max_depth && area > 0.0f) {
-        for (int c = lid; c < 6 * root.y; c += size) {
-            int k = c / 6;
-            if (((mask >> k) & 1UL) == 0) continue;
-            int axis = (c % 6) >> 1;
-            float plane = KdClip_axis((c & 1) ? sel_hi[root.x + k] : sel_lo[root.x + k], axis);
-            if (!(KdClip_axis(lo, axis) < plane && plane < KdClip_axis(hi, axis))) continue;
-            ulong2 m = cand[6 * root.x + c];
-            float below = (float)popcount(m.x & mask);
-            float above = (float)popcount(m.y & mask);
-            float cost = KD_COST_TRAVERSE +
-                         (below * KdBuild_area(lo, KdClip_with(hi, axis, plane)) +
-                          above * KdBuild_area(KdClip_with(lo, axis, plane), hi)) / area;
-            if (cost < my_cost) {
-                my_cost = cost;
-                my_cand = c;
+    float leaf_cost = 0.0f;
+    if (i < n) {
+        int2 node = sn_node[i];
+        ulong mask = sn_mask[i];
+        int4 root = small_roots[node.x];
+        float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
+        float area = KdBuild_area(lo, hi);
+        leaf_cost = (float)popcount(mask);
+        if (rec_info[node.y].w < max_depth && area > 0.0f && leaf_cost > KD_COST_TRAVERSE) {
+#if KD_SAH_LANES == 1
+            /* the candidates of the node's elements only, lowest bit first */
+            for (ulong left = mask; left != 0UL; left &= left - 1UL) {
+                int k = popcount((left & (~left + 1UL)) - 1UL);
+                for (int c = 6 * k; c < 6 * k + 6; ++c)
+                    KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand,
+                                     &my_cost, &my_cand);
             }
+#else
+            for (int c = lane; c < 6 * root.y; c += KD_SAH_LANES) {
+                int k = c / 6;
+                if (((mask >> k) & 1UL) != 0UL)
+                    KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand,
+                                     &my_cost, &my_cand);
+            }
+#endif
         }
     }
+#if KD_SAH_LANES > 1
+    /* the node's lanes agree on the cheapest, lowest candidate */
     cost_s[lid] = my_cost;
     cand_s[lid] = my_cand;
     barrier(CLK_LOCAL_MEM_FENCE);
-    for (int s = size / 2; s > 0; s >>= 1) {
-        if (lid < s) {
+    for (int s = KD_SAH_LANES / 2; s > 0; s >>= 1) {
+        if (lane < s) {
             float other = cost_s[lid + s];
             int other_cand = cand_s[lid + s];
             if (other < cost_s[lid] || (other == cost_s[lid] && other_cand >= 0 &&
@@ -499,7 +534,10 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
         }
         barrier(CLK_LOCAL_MEM_FENCE);
     }
-    if (lid == 0) best[i] = cost_s[0] < leaf_cost ? cand_s[0] : -1;
+    my_cost = cost_s[lid];
+    my_cand = cand_s[lid];
+#endif
+    if (i < n && lane == 0) best[i] = my_cost < leaf_cost ? my_cand : -1;
 }
 
 /* Per small node: a split writes its record and two child small nodes
@@ -527,8 +565,8 @@ __kernel void KdBuild_small_emit(
     if (c < 0) {
         int at = leaf_base + (int)(r >> 32);
         rec_info[node.y] = (int4)(KD_LEAF, at, popcount(mask), depth);
-        for (int k = 0; k < root.y; ++k)
-            if ((mask >> k) & 1UL) leaf_tris[at++] = sel_tri[root.x + k];
+        for (ulong left = mask; left != 0UL; left &= left - 1UL)
+            leaf_tris[at++] = sel_tri[root.x + popcount((left & (~left + 1UL)) - 1UL)];
         return;
     }
     int split = (int)(r & 0xffffffffL);
