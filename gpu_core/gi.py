@@ -6,7 +6,8 @@ sample points chosen among them (adaptive seeding + k-means); the
 illumination cut of the global photon tree; final gathering at the sample
 points through the cut; Ward interpolation to every shading point; caustics
 by density estimation of the caustic map at the shading points. The
-renderer adds direct light and specular paths, traced, to what this returns.
+image kernel reads the irradiance back at its camera paths' first diffuse
+hits and adds direct light and specular paths, traced.
 """
 
 from __future__ import annotations
@@ -25,12 +26,15 @@ from .settings import RenderSettings
 
 
 @dataclass
-class GiImage:
-    """Radiance per pixel of the render window, rows from the bottom."""
+class GiField:
+    """Irradiance at the shading-point grid of a render window (see
+    shading_points.py), which the image kernel reads (render.cl, RENDER_GI)."""
 
-    indirect: np.ndarray  # (H, W, 3) float32: indirect diffuse light
-    caustics: np.ndarray  # (H, W, 3) float32
-    by_lobe: np.ndarray  # (3, H, W, 3) float32: indirect + caustics by the camera path's first lobe (LOBE_*)
+    positions: np.ndarray  # (M, 4) float32 per grid slot: xyz, w = 1 where there is a point
+    normals: np.ndarray  # (M, 4) float32
+    indirect: np.ndarray  # (M, 4) float32: indirect irradiance (rgb)
+    caustics: np.ndarray  # (M, 4) float32: caustic irradiance (rgb)
+    subpixels: int
     stats: dict = field(default_factory=dict)
 
 
@@ -72,10 +76,10 @@ def _photon_key(scene: Scene, settings: RenderSettings) -> bytes:
 
 
 def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int], settings: RenderSettings,
-              reuse: PhotonReuse | None = None) -> GiImage:
-    """Indirect light and caustics of the pixels in ``window`` for a
-    validated ``scene`` uploaded by the renderer (``up``, same centre);
-    ``reuse`` keeps photon maps from one render to the next."""
+              reuse: PhotonReuse | None = None) -> GiField:
+    """Indirect and caustic irradiance at the shading points of the pixels
+    in ``window`` for a validated ``scene`` uploaded by the renderer (``up``,
+    same centre); ``reuse`` keeps photon maps from one render to the next."""
     x0, y0, x1, y1 = window
     w, h = x1 - x0, y1 - y0
     ms: dict[str, float] = {}
@@ -118,8 +122,8 @@ def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int
         caustic = maps.caustic_map.irradiance(points.positions, points.normals, settings.photon_k)
         ms["caustics"] = (time.perf_counter() - began) * 1e3
 
-    by_lobe = np.stack([_image(points, irradiance + caustic, w, h, points.lobe == lobe) for lobe in range(3)])
-    return GiImage(_image(points, irradiance, w, h), _image(points, caustic, w, h), by_lobe, stats)
+    return GiField(*(_grid(points, values) for values in (points.positions, points.normals, irradiance, caustic)),
+                   subpixels=points.subpixels, stats=stats)
 
 
 def _irradiance_at(the_cut: cut.Cut, caustic_map, k: int):
@@ -155,14 +159,10 @@ def _strata(rays: int) -> int:
     return max(1, int(round(np.sqrt(max(int(rays), 1)))))
 
 
-def _image(points: shading_points.ShadingPoints, irradiance: np.ndarray, w: int, h: int,
-           which: np.ndarray | None = None) -> np.ndarray:
-    """Pixel radiance: the mean over a pixel's camera rays of each shading
-    point's factor times its irradiance (rays without a point add nothing);
-    only the points ``which`` when given."""
-    radiance = np.clip(points.factor * np.nan_to_num(irradiance, nan=0.0, posinf=0.0), 0.0, None)
-    if which is not None:
-        radiance = np.where(which[:, None], radiance, 0.0)
-    out = np.zeros((w * h, 3), np.float64)
-    np.add.at(out, points.pixel_index, radiance)
-    return (out / points.subpixels**2).astype(np.float32).reshape(h, w, 3)
+def _grid(points: shading_points.ShadingPoints, values: np.ndarray) -> np.ndarray:
+    """Per-point values (N, 3) in the shading-point grid as (M, 4) float32,
+    w = 1 where a slot holds a point (0 elsewhere)."""
+    out = np.zeros((points.grid_size, 4), np.float32)
+    out[points.slots, :3] = np.nan_to_num(values, nan=0.0, posinf=0.0)
+    out[points.slots, 3] = 1.0
+    return out

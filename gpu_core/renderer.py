@@ -20,7 +20,6 @@ from .errors import BudgetError, RenderCancelled
 from .layout import CAMERA_DTYPE, LIGHT_DTYPE
 from .scene import CAMERA_ORTHO, Scene, validate
 from .settings import RenderSettings
-from .shading_points import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION
 
 _BATCH_SECONDS = 0.1  # aimed duration of one kernel launch (cancel latency)
 _FIRST_BATCH_PATHS = 1 << 14  # camera paths in the first launch, before any timing
@@ -116,19 +115,21 @@ class Renderer:
         _check_stop(should_stop)
         with timer.stage("upload"):
             up = self._upload(scene, center, tree, emit_tris, emit_cdf)
+        # GI mode: indirect light and caustics cached at shading points first; the
+        # path tracer then gives direct light and specular paths, and reads the cache
+        field_ = None
+        if mode == "gi":
+            if progress is not None:
+                progress(0.0, "global illumination")
+            field_ = self._gi_field(scene, up, settings, timer, plan)
+            defines["RENDER_GI"] = 1
+            _check_stop(should_stop)
+        traced = replace(settings, diffuse_bounces=0) if mode == "gi" else settings
         with timer.stage("compile"):
             program = self.device.program("render.cl", defines)
         _check_stop(should_stop)
-        # in GI mode the path tracer gives direct light and specular paths; the cache the rest
-        traced = replace(settings, diffuse_bounces=0) if mode == "gi" else settings
         with timer.stage("render"):
-            passes, batches = self._run(program, up, scene, traced, progress, should_stop)
-        gi_stats = None
-        if mode == "gi":
-            _check_stop(should_stop)
-            if progress is not None:
-                progress(1.0, "global illumination")
-            gi_stats = self._add_gi(scene, up, settings, passes, timer, plan)
+            passes, batches = self._run(program, up, scene, traced, progress, should_stop, field_)
         stats = {
             "device": self.device.name,
             "mode": mode,
@@ -145,8 +146,8 @@ class Renderer:
             "kdtree": up.tree.stats,
             **scene.report.as_stats(),
         }
-        if gi_stats is not None:
-            stats["gi"] = gi_stats
+        if field_ is not None:
+            stats["gi"] = {key: value for key, value in field_.stats.items() if key != "ms"}
         warnings = list(scene.warnings)
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
@@ -164,24 +165,18 @@ class Renderer:
 
     # -- global illumination ----------------------------------------------------
 
-    def _add_gi(self, scene: Scene, up: _Uploaded, settings: RenderSettings, passes: dict, timer: _Timer,
-                plan: list[str]) -> dict:
-        """Add indirect diffuse light and caustics from photon maps and the
-        irradiance cache (gi.py) to the traced passes; returns their stats."""
+    def _gi_field(self, scene: Scene, up: _Uploaded, settings: RenderSettings, timer: _Timer,
+                  plan: list[str]) -> gi.GiField:
+        """Indirect and caustic irradiance at the shading points, from photon
+        maps and the irradiance cache (gi.py); its stages go into the timer
+        and the plan."""
         if self._photon_reuse is None:
             self._photon_reuse = gi.PhotonReuse()
-        image = gi.render_gi(self.device, scene, up, scene.camera.pixel_window, settings, self._photon_reuse)
-        for stage, ms in image.stats["ms"].items():
+        field_ = gi.render_gi(self.device, scene, up, scene.camera.pixel_window, settings, self._photon_reuse)
+        for stage, ms in field_.stats["ms"].items():
             timer.ms[stage] = ms
-        plan += gi.plan(image.stats)
-        passes["Combined"][..., :3] += image.indirect + image.caustics
-        if settings.light_passes:
-            # the light goes to the pass of the camera path's first lobe, as in the path tracer
-            for name, lobe in (("Diffuse Indirect", LOBE_DIFFUSE), ("Glossy Indirect", LOBE_GLOSSY),
-                               ("Transmission Indirect", LOBE_TRANSMISSION)):
-                passes[name] += image.by_lobe[lobe]
-            passes["Caustics"] += image.caustics
-        return {key: value for key, value in image.stats.items() if key != "ms"}
+        plan += gi.plan(field_.stats)
+        return field_
 
     # -- upload ---------------------------------------------------------------
 
@@ -225,7 +220,8 @@ class Renderer:
 
     # -- image kernel ---------------------------------------------------------
 
-    def _run(self, program, up: _Uploaded, scene: Scene, settings: RenderSettings, progress, should_stop):
+    def _run(self, program, up: _Uploaded, scene: Scene, settings: RenderSettings, progress, should_stop,
+             field_: gi.GiField | None = None):
         dev = self.device
         x0, y0, x1, y1 = scene.camera.pixel_window
         w, h = x1 - x0, y1 - y0
@@ -235,6 +231,10 @@ class Renderer:
         # passes nobody asked for get a one-element stand-in the kernel never writes
         light = dev.empty(total * 16 * len(LIGHT_PASSES) if settings.light_passes else 16)
         albedo, feature_normal = (dev.empty(total * 16 if settings.denoising_passes else 16) for _ in range(2))
+        # the GI cache the kernel reads (RENDER_GI); stand-ins it never reads otherwise
+        gi_buffers = [dev.buffer(a) for a in (field_.positions, field_.normals, field_.indirect, field_.caustics)] \
+            if field_ is not None else [dev.empty(16)] * 4
+        gi_sub = np.int32(field_.subpixels if field_ is not None else 1)
         world = up.world.copy()
         world[3] = 1.0 if settings.transparent_background else 0.0
         kernel = cl.Kernel(program, "Render_pixels")
@@ -253,7 +253,7 @@ class Renderer:
                 np.array([w, h, count, start], np.int32), np.array([x0, y0], np.int32),
                 np.int32(settings.samples), np.int32(settings.max_bounces), np.int32(settings.diffuse_bounces),
                 np.int32(settings.light_samples), np.uint32(settings.seed), np.float32(settings.clamp),
-                np.int32(outputs), combined, depth, normal, light, albedo, feature_normal,
+                np.int32(outputs), combined, depth, normal, light, albedo, feature_normal, *gi_buffers, gi_sub,
             )
             dev.queue.finish()
             elapsed = time.perf_counter() - began

@@ -14,19 +14,12 @@
  * rays hit the other wall instead of slipping out past it. */
 #define GI_POINTS_PULL_BACK 1e-5f
 
-#define GI_LOBE_DIFFUSE 0 /* the camera sees the point directly */
-#define GI_LOBE_GLOSSY 1 /* through a mirror or a glass reflection first */
-#define GI_LOBE_TRANSMISSION 2 /* through a glass refraction first */
-
 /* Per point (sub-pixel s of pixel p is point p * sub^2 + s, sub positions
- * row by row): position (w = 1 where a diffuse surface was found, else 0), shading
- * normal facing the camera path, and the factor from that surface's irradiance
- * to the pixel's radiance, throughput x diffuse weight x albedo / pi (w = the
- * camera path's first lobe, GI_LOBE_*, which picks the light pass). */
+ * row by row): position (w = 1 where a diffuse surface was found, else 0)
+ * and shading normal facing the camera path. */
 __kernel void GiPoints_trace(KDTREE_PARAMS, SURFACE_PARAMS, const __global Camera *camera,
                              const int4 window, const int sub, const int max_bounces,
-                             __global float4 *out_pos, __global float4 *out_nrm,
-                             __global float4 *out_factor) {
+                             __global float4 *out_pos, __global float4 *out_nrm) {
     int g = get_global_id(0);
     int w = window.z - window.x, h = window.w - window.y;
     if (g >= w * h * sub * sub) return;
@@ -38,11 +31,9 @@ __kernel void GiPoints_trace(KDTREE_PARAMS, SURFACE_PARAMS, const __global Camer
     Camera_ray(&cam, window.x + pixel % w + (s % sub + 0.5f) / sub, window.y + pixel / w + (s / sub + 0.5f) / sub,
                &org, &dir, &tmin, &tmax);
     float pull_back = GI_POINTS_PULL_BACK * length(tree.bmax - tree.bmin);
-    float3 throughput = (float3)(1.0f);
     out_pos[g] = (float4)(0.0f);
     out_nrm[g] = (float4)(0.0f);
-    out_factor[g] = (float4)(0.0f);
-    int bounces = 0, passes = 0, first_lobe = GI_LOBE_DIFFUSE;
+    int bounces = 0, passes = 0;
     while (true) {
         Hit hit;
         if (!KdTree_intersect(&tree, org, dir, tmin, tmax, &hit)) return;
@@ -56,28 +47,23 @@ __kernel void GiPoints_trace(KDTREE_PARAMS, SURFACE_PARAMS, const __global Camer
             tmax = RAY_FAR;
             continue;
         }
-        float3 base = Surface_base(&m, tex_atlas, tex_infos, sp.uv);
         float diffuse = Surface_diffuse_weight(&m);
         if (diffuse > 0.0f || bounces >= max_bounces) {
             out_pos[g] = (float4)(sp.p - pull_back * dir, diffuse > 0.0f ? 1.0f : 0.0f);
             out_nrm[g] = (float4)(sp.ns, 0.0f);
-            out_factor[g] = (float4)(throughput * base * (diffuse / PI_F), (float)first_lobe);
             return;
         }
         /* a purely specular surface: follow its likelier direction */
         bool refracted = false;
         if (m.metallic >= 0.5f || m.transmission <= 0.0f) {
             dir = Bsdf_mirror(dir, sp.ns, sp.ng);
-            throughput *= base;
         } else {
             bool entering = dot(sp.ng_raw, sp.ng) > 0.0f;
             float cos_t;
             float eta = entering ? 1.0f / m.ior : m.ior;
             float f = Bsdf_fresnel(fabs(dot(dir, sp.ns)), eta, &cos_t);
             dir = Bsdf_glass(dir, sp.ns, sp.ng, entering, m.ior, f < 0.5f ? 1.0f : 0.0f, &refracted);
-            if (refracted) throughput *= base;
         }
-        if (bounces == 0) first_lobe = refracted ? GI_LOBE_TRANSMISSION : GI_LOBE_GLOSSY;
         org = sp.p + (refracted ? -sp.eps : sp.eps) * sp.ng;
         tmin = 0.0f;
         tmax = RAY_FAR;

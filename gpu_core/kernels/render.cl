@@ -14,6 +14,7 @@
 #include "surface.h"
 
 #define RENDER_MAX_PASSTHROUGH 64
+#define RENDER_GI_MIN_COS 0.7f /* a shading point stands for surfaces facing within about 45 degrees */
 
 /* Fraction of light passing along a shadow ray: 0 when an opaque surface
  * blocks it; with see-through (alpha) materials in the scene, the product of
@@ -104,6 +105,41 @@ inline void Render_add(float3 *light, float3 c, int first_pass, int events, bool
     if (caustic) light[PASS_CAUSTICS] += c;
 }
 
+#ifdef RENDER_GI
+/* GI mode: the cached irradiance at the shading point that stands for
+ * surface point p (normal n) on pixel (wx, wy) of the window: among the
+ * points of this pixel and its eight neighbours, the nearest one facing the
+ * same way. False where none does (a surface no shading ray found). */
+inline bool Render_gi_lookup(const __global float4 *gi_pos, const __global float4 *gi_nrm,
+                             const __global float4 *gi_indirect, const __global float4 *gi_caustic,
+                             int sub, int4 window, int wx, int wy, float3 p, float3 n,
+                             float3 *indirect, float3 *caustic) {
+    int best = -1;
+    float best_d2 = INFINITY;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            int x = wx + dx, y = wy + dy;
+            if (x < 0 || y < 0 || x >= window.x || y >= window.y) continue;
+            int first = (y * window.x + x) * sub * sub;
+            for (int k = first; k < first + sub * sub; ++k) {
+                float4 q = gi_pos[k];
+                if (q.w <= 0.0f || dot(gi_nrm[k].xyz, n) < RENDER_GI_MIN_COS) continue;
+                float3 d = q.xyz - p;
+                float d2 = dot(d, d);
+                if (d2 < best_d2) {
+                    best_d2 = d2;
+                    best = k;
+                }
+            }
+        }
+    }
+    if (best < 0) return false;
+    *indirect = gi_indirect[best].xyz;
+    *caustic = gi_caustic[best].xyz;
+    return true;
+}
+#endif
+
 /* A direction in camera space (x right, y up, z back), as Cycles stores the
  * denoising normal. */
 inline float3 Render_to_camera(const Camera *cam, float3 d) {
@@ -126,7 +162,10 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                             const uint seed, const float clamp_value, const int outputs,
                             __global float4 *out_combined, __global float *out_depth,
                             __global float4 *out_normal, __global float4 *out_light,
-                            __global float4 *out_albedo, __global float4 *out_feature_normal) {
+                            __global float4 *out_albedo, __global float4 *out_feature_normal,
+                            const __global float4 *gi_pos, const __global float4 *gi_nrm,
+                            const __global float4 *gi_indirect, const __global float4 *gi_caustic,
+                            const int gi_sub) {
     int i = get_global_id(0);
     int g = window.w + i; /* index in the render window */
     int window_pixels = window.x * window.y;
@@ -218,6 +257,16 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 float3 e = Render_direct(&tree, tri_material, materials, lights, light_count, &em, sky, &sp,
                                          light_samples, &rng);
                 Render_add(light, throughput * base * (1.0f / PI_F) * e, first_pass, bounces + 1, false, false);
+#ifdef RENDER_GI
+                /* GI mode: indirect light and caustics from the cache at the first diffuse event */
+                float3 e_indirect, e_caustic;
+                if (diffuse == 0 && Render_gi_lookup(gi_pos, gi_nrm, gi_indirect, gi_caustic, gi_sub, window, wx, wy,
+                                                     sp.p, sp.ns, &e_indirect, &e_caustic)) {
+                    float3 f = throughput * base * (1.0f / PI_F);
+                    Render_add(light, f * e_indirect, first_pass, bounces + 2, false, false);
+                    Render_add(light, f * e_caustic, first_pass, bounces + 2, false, true);
+                }
+#endif
                 /* path-traced indirect light: cosine sampling cancels the
                  * Lambert cosine/pi, leaving the albedo; Russian roulette
                  * after two diffuse bounces keeps the estimate unbiased */
