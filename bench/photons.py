@@ -6,9 +6,8 @@ a glass sphere, an area light under the ceiling). Each size takes that
 many of the stored global photons; the queries are other photons' positions
 jittered by a small fraction of the box, so both searches see surface
 points, as the final gather does. Both trees index the same points and
-answer the same queries in the same run; every time is the best of
-``--repeats`` runs after a warm-up (the machine is shared, and the best
-run is the least disturbed one). Besides wall time, the CPU time of the
+answer the same queries in the same run; every time is the median of
+``--repeats`` runs after a warm-up (the machine is shared). Besides wall time, the CPU time of the
 process (all threads) per query is shown: on a shared machine it is the
 steadier measure of the work each search does.
 
@@ -26,6 +25,7 @@ import json
 import os
 import platform
 import resource
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -104,9 +104,9 @@ def _cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def best_ms(run, repeats: int) -> tuple[float, float, object]:
-    """Best wall time and best CPU time (ms) of ``run()`` over ``repeats``
-    calls after one warm-up, and its last result."""
+def median_ms(run, repeats: int) -> tuple[float, float, object]:
+    """Median wall time and median CPU time (ms) of ``run()`` over
+    ``repeats`` calls after one warm-up, and its last result."""
     result = run()
     wall, cpu = [], []
     for _ in range(repeats):
@@ -114,7 +114,7 @@ def best_ms(run, repeats: int) -> tuple[float, float, object]:
         result = run()
         wall.append((time.perf_counter() - start) * 1e3)
         cpu.append((_cpu_s() - start_cpu) * 1e3)
-    return min(wall), min(cpu), result
+    return statistics.median(wall), statistics.median(cpu), result
 
 
 def trace(device, stored: int, repeats: int) -> tuple[dict, np.ndarray]:
@@ -124,12 +124,11 @@ def trace(device, stored: int, repeats: int) -> tuple[dict, np.ndarray]:
     pilot = trace_photon_maps(device, scene, global_photons=20_000, caustic_photons=5_000)  # also compiles
     per_photon = pilot.stats["stored"]["global"] / pilot.stats["emitted"]["global"]
     emitted = int(stored / per_photon * 1.05) + 1
-    best = None
-    for seed in range(repeats):
-        maps = trace_photon_maps(device, scene, global_photons=emitted, caustic_photons=emitted // 4, seed=seed)
-        if best is None or maps.stats["ms"]["trace_global"] < best.stats["ms"]["trace_global"]:
-            best = maps
-    s = best.stats
+    runs = [trace_photon_maps(device, scene, global_photons=emitted, caustic_photons=emitted // 4, seed=seed)
+            for seed in range(max(repeats, 1))]
+    runs.sort(key=lambda maps: maps.stats["ms"]["trace_global"])
+    median = runs[len(runs) // 2]  # the run of median tracing time
+    s = median.stats
     row = {
         "emitted_global": s["emitted"]["global"],
         "emitted_caustic": s["emitted"]["caustic"],
@@ -140,7 +139,7 @@ def trace(device, stored: int, repeats: int) -> tuple[dict, np.ndarray]:
         "global_photons_per_s": s["emitted"]["global"] / s["ms"]["trace_global"] * 1e3,
         "caustic_photons_per_s": s["emitted"]["caustic"] / s["ms"]["trace_caustic"] * 1e3,
     }
-    return row, best.global_map.positions()
+    return row, median.global_map.positions()
 
 
 def measure(device, points: np.ndarray, n: int, ks: list[int], queries: int, repeats: int) -> dict:
@@ -151,14 +150,14 @@ def measure(device, points: np.ndarray, n: int, ks: list[int], queries: int, rep
     pts = points[rng.choice(len(points), n, replace=False)]
     q = points[rng.integers(0, len(points), queries)] + rng.normal(0, 0.005, (queries, 3)).astype(np.float32)
     row = {"photons": n, "queries": queries}
-    row["build_ms"], _, tree = best_ms(lambda: PointTree.build(device, pts), repeats)
+    row["build_ms"], _, tree = median_ms(lambda: PointTree.build(device, pts), repeats)
     row["tree"] = {k: v for k, v in tree.stats.items() if k != "ms"}
-    row["scipy_build_ms"], _, ck = best_ms(lambda: cKDTree(pts), repeats)
+    row["scipy_build_ms"], _, ck = median_ms(lambda: cKDTree(pts), repeats)
     row["knn"] = {}
     for k in ks:
         tree = PointTree.build(device, pts, k_hint=k)
-        ours_ms, ours_cpu, (_, d2) = best_ms(lambda: tree.knn(q, k), repeats)
-        theirs_ms, theirs_cpu, (dist, _) = best_ms(lambda: ck.query(q, k, workers=2), repeats)
+        ours_ms, ours_cpu, (_, d2) = median_ms(lambda: tree.knn(q, k), repeats)
+        theirs_ms, theirs_cpu, (dist, _) = median_ms(lambda: ck.query(q, k, workers=2), repeats)
         row["knn"][k] = {
             "ours_qps": queries / ours_ms * 1e3,
             "scipy_qps": queries / theirs_ms * 1e3,

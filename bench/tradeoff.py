@@ -1,16 +1,19 @@
 """Time against error: GPU GI's presets and knobs beside Cycles.
 
-For each scene, a high-sample Cycles render is the reference (cached in
-bench/results/). Then, in the same run: Cycles at 4..1024 samples with and
-without its denoiser, and GPU GI's presets and a sweep of its main knobs
-(photons, cache points, gather rays, k) from the Preview preset. Each
-configuration's render time (median of --repeats, the bpy render call
-including export) and relative RMSE against the reference (RMS of the
-per-pixel RGB difference over the reference's mean) go into a table and a
-log-log plot, bench/figures/tradeoff.png.
+For each scene, a high-sample Cycles render is the reference: the stored
+test reference at 64 px (tests/references/), else one rendered here and
+cached in bench/results/. Then, in the same run: Cycles at 4..1024 samples
+with and without its denoiser (set up like the reference: box filter, no
+clamp, no glossy filter, deep bounces), and GPU GI's presets and a sweep of
+its main knobs (photons, cache points, gather rays, k) from the Preview
+preset. Each configuration's render time (median of --repeats, the bpy
+render call including export) and its error against the reference go into
+a table and a log-log plot, bench/figures/tradeoff.png. The error is the
+relative RMSE of display values (the metric of tests/test_gi_vs_cycles.py);
+the linear-light relative RMSE is printed beside it.
 
     python bench/tradeoff.py [--scenes cornell_box box_torus caustics]
-        [--size 128] [--reference-samples 4096] [--repeats 3] [--quick]
+        [--size 64] [--reference-samples 4096] [--repeats 3] [--quick]
 """
 
 from __future__ import annotations
@@ -20,9 +23,16 @@ import json
 import os
 import statistics
 
+import sys
+
 import numpy as np
 
 from bpy_render import ROOT, load_bpy, machine, open_scene, render
+
+sys.path.insert(0, os.path.join(ROOT, "tests"))
+sys.path.insert(0, os.path.join(ROOT, "tests", "references"))
+from make_references import configure as cycles_reference_settings  # noqa: E402
+from test_gi_vs_cycles import display  # noqa: E402
 
 RESULTS = os.path.join(ROOT, "bench", "results")
 FIGURE = os.path.join(ROOT, "bench", "figures", "tradeoff.png")
@@ -40,16 +50,21 @@ def relative_rmse(image: np.ndarray, reference: np.ndarray) -> float:
     return float(np.sqrt(((image - reference) ** 2).mean()) / max(reference.mean(), 1e-30))
 
 
+def errors(image: np.ndarray, reference: np.ndarray) -> dict:
+    """Relative RMSE of display values (the plotted error) and of linear light."""
+    return dict(error=relative_rmse(display(image), display(reference)), linear=relative_rmse(image, reference))
+
+
 def cycles_settings(scene, samples: int, denoise: bool) -> None:
-    c = scene.cycles
-    c.device, c.samples = "CPU", samples
-    c.use_adaptive_sampling = False
-    c.use_denoising = denoise
-    c.seed = 0
+    cycles_reference_settings(scene, scene.render.resolution_x, samples)
+    scene.cycles.use_denoising = denoise
 
 
 def reference(bpy, name: str, size: int, samples: int) -> np.ndarray:
-    """The scene rendered by Cycles at ``samples`` samples (cached)."""
+    """The scene rendered by Cycles at ``samples`` samples (stored or cached)."""
+    stored = os.path.join(ROOT, "tests", "references", f"{name}_{size}.npy")
+    if samples == 4096 and os.path.exists(stored):
+        return np.load(stored).astype(np.float64)
     path = os.path.join(RESULTS, f"reference_{name}_{size}_{samples}.npy")
     if os.path.exists(path):
         return np.load(path)
@@ -93,16 +108,16 @@ def run_scene(bpy, name: str, args) -> list[dict]:
             image, seconds = timed(bpy, name, args.size, "CYCLES",
                                    lambda s: cycles_settings(s, samples, denoise), repeats)
             rows.append(dict(scene=name, engine="Cycles" + (" denoised" if denoise else ""),
-                             config=f"{samples} spp", seconds=seconds, error=relative_rmse(image, ref)))
+                             config=f"{samples} spp", seconds=seconds, **errors(image, ref)))
     for preset in PRESETS:
         image, seconds = timed(bpy, name, args.size, "GPUGI", ours(preset), args.repeats)
         rows.append(dict(scene=name, engine="GPU GI preset", config=preset.title(), seconds=seconds,
-                         error=relative_rmse(image, ref)))
+                         **errors(image, ref)))
     for knob, values in SWEEPS.items():
         for value in values:
             image, seconds = timed(bpy, name, args.size, "GPUGI", ours("PREVIEW", **{knob: value}), args.repeats)
             rows.append(dict(scene=name, engine="GPU GI sweep", config=f"{knob}={value}", seconds=seconds,
-                             error=relative_rmse(image, ref)))
+                             **errors(image, ref)))
     return rows
 
 
@@ -137,7 +152,7 @@ def plot(rows: list[dict], path: str) -> None:
                 ax.loglog(*zip(*pts), style, label=engine)
         ax.set_title(name)
         ax.set_xlabel("render time (s)")
-        ax.set_ylabel("relative RMSE vs Cycles reference")
+        ax.set_ylabel("relative RMSE of display values vs Cycles reference")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
@@ -148,21 +163,23 @@ def plot(rows: list[dict], path: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["cornell_box", "box_torus", "caustics"])
-    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--reference-samples", type=int, default=4096)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--quick", action="store_true", help="64 px, 1024-sample reference, one repeat")
+    parser.add_argument("--quick", action="store_true", help="64 px, one repeat")
     args = parser.parse_args()
     if args.quick:
-        args.size, args.reference_samples, args.repeats = 64, 1024, 1
+        args.size, args.repeats = 64, 1
     bpy = load_bpy()
-    print(f"machine: {machine()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp")
+    print(f"machine: {machine()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp; "
+          f"median of {args.repeats} renders (1 above 64 spp)")
     rows = []
     for name in args.scenes:
         print(f"{name}:")
         scene_rows = run_scene(bpy, name, args)
         for r in scene_rows:
-            print(f"  {r['engine']:16s} {r['config']:22s} {r['seconds']:8.2f} s   rel. RMSE {r['error']:.4f}")
+            print(f"  {r['engine']:16s} {r['config']:22s} {r['seconds']:8.2f} s   "
+                  f"display rel. RMSE {r['error']:.4f}   linear {r['linear']:.4f}")
         print("  " + target(scene_rows))
         rows += scene_rows
     os.makedirs(RESULTS, exist_ok=True)

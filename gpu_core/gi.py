@@ -12,16 +12,15 @@ hits and adds direct light and specular paths, traced.
 
 from __future__ import annotations
 
-import hashlib
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import cache, cut, gather, shading_points
 from .device import Device
 from .photons import PhotonMaps, trace_photon_maps
-from .scene import Lights, Materials, Scene
+from .scene import Scene, scene_digest
 from .settings import RenderSettings
 
 
@@ -62,17 +61,8 @@ class PhotonReuse:
 
 def _photon_key(scene: Scene, settings: RenderSettings) -> bytes:
     """A digest of everything photon tracing reads (not the camera)."""
-    digest = hashlib.blake2b(digest_size=16)
-    arrays = [scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.world_color, *scene.textures]
-    arrays += [getattr(scene.materials, f.name) for f in fields(Materials) if f.name != "names"]
-    arrays += [getattr(scene.lights, f.name) for f in fields(Lights) if f.name != "names"]
-    for array in arrays:
-        a = np.ascontiguousarray(array)
-        digest.update(str((a.dtype, a.shape)).encode())
-        digest.update(a.tobytes())
     knobs = (settings.global_photons, settings.caustic_photons, settings.seed, settings.photon_k)
-    digest.update(repr(knobs).encode())
-    return digest.digest()
+    return scene_digest(scene) + repr(knobs).encode()
 
 
 def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int], settings: RenderSettings,

@@ -7,6 +7,7 @@ progress and asks whether to stop, so Esc in Blender takes effect quickly.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass, field, replace
 from typing import Callable
@@ -89,6 +90,7 @@ class Renderer:
     def __init__(self, device: Device):
         self.device = device
         self._photon_reuse = None  # gi.PhotonReuse, made by the first GI render
+        self._tree: tuple[bytes, kdtree.KdTree] | None = None  # the last triangles' digest and kd-tree
 
     def render(
         self,
@@ -110,8 +112,7 @@ class Renderer:
         # positions relative to the scene centre keep float32 precision far from the origin
         lo, hi = scene.bounds()
         center = 0.5 * (lo + hi)
-        with timer.stage("kdtree"):
-            tree = kdtree.build(self.device, (scene.triangles - center).astype(np.float32))
+        tree = self._kdtree(scene, center, timer, plan)
         _check_stop(should_stop)
         with timer.stage("upload"):
             up = self._upload(scene, center, tree, emit_tris, emit_cdf)
@@ -152,6 +153,18 @@ class Renderer:
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
         return RenderResult(passes=passes, stats=stats, warnings=warnings)
+
+    def _kdtree(self, scene: Scene, center: np.ndarray, timer: _Timer, plan: list[str]) -> kdtree.KdTree:
+        """The scene's kd-tree: the last render's when the triangles did not
+        change (the plan then says kdtree_reused), else built."""
+        digest = hashlib.blake2b(np.ascontiguousarray(scene.triangles).tobytes(), digest_size=16).digest()
+        if self._tree is not None and self._tree[0] == digest:
+            plan[plan.index("kdtree")] = "kdtree_reused"
+            return self._tree[1]
+        with timer.stage("kdtree"):
+            tree = kdtree.build(self.device, (scene.triangles - center).astype(np.float32))
+        self._tree = (digest, tree)
+        return tree
 
     def upload(self, scene: Scene) -> tuple[Scene, _Uploaded]:
         """The validated scene and its device copy, kd-tree built, in the

@@ -8,7 +8,8 @@ from the origin keeps its precision until the renderer recentres it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import hashlib
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -382,3 +383,18 @@ def _check_camera(camera: Camera) -> None:
         raise SceneError(f"render border {camera.pixel_window} lies outside the {camera.width}x{camera.height} image")
     if not (0 <= camera.clip_start < camera.clip_end):
         raise SceneError(f"camera clipping {camera.clip_start}..{camera.clip_end} is empty")
+
+
+def scene_digest(scene: Scene) -> bytes:
+    """A digest of everything but the camera: geometry, materials, lights,
+    world and textures. Renders of scenes with the same digest can share a
+    kd-tree and photon maps."""
+    digest = hashlib.blake2b(digest_size=16)
+    arrays = [scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.world_color, *scene.textures]
+    arrays += [getattr(scene.materials, f.name) for f in fields(Materials) if f.name != "names"]
+    arrays += [getattr(scene.lights, f.name) for f in fields(Lights) if f.name != "names"]
+    for array in arrays:
+        a = np.ascontiguousarray(array)
+        digest.update(str((a.dtype, a.shape)).encode())
+        digest.update(a.tobytes())
+    return digest.digest()

@@ -108,17 +108,19 @@ def test_plan_names_the_gi_stages_and_skips_the_caustic_map_without_mirrors(devi
     assert {"caustic_photons", "caustics"} <= set(with_mirror.stats["plan"])
 
 
-def test_photons_are_not_traced_again_when_only_the_camera_moves(device):
+def test_photons_and_kdtree_are_not_rebuilt_when_only_the_camera_moves(device):
     renderer = Renderer(device)
     scene = box_scene()
     first = renderer.render(scene, GI)
     camera = dataclasses.replace(scene.camera, matrix=scene.camera.matrix.copy())
     camera.matrix[0, 3] += 0.1
     moved = renderer.render(dataclasses.replace(scene, camera=camera), GI)
-    assert "global_photons" in first.stats["plan"]
+    assert "global_photons" in first.stats["plan"] and "kdtree" in first.stats["plan"]
     assert "global_photons_reused" in moved.stats["plan"] and moved.stats["gi"]["photons_reused"]
+    assert "kdtree_reused" in moved.stats["plan"]
     brighter = renderer.render(box_scene(power=200.0), GI)
     assert "global_photons" in brighter.stats["plan"]  # a light edit traces again
+    assert "kdtree_reused" in brighter.stats["plan"]  # the same triangles keep their tree
 
 
 # -- extremes ----------------------------------------------------------------------
