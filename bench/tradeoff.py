@@ -39,6 +39,7 @@ FIGURE = os.path.join(ROOT, "bench", "figures", "tradeoff.png")
 CYCLES_SAMPLES = (4, 16, 64, 256, 1024)
 PRESETS = ("DRAFT", "PREVIEW", "FINAL")
 SWEEPS = {  # knob -> values, each applied on top of the Preview preset
+    "samples": (4, 16, 64),
     "global_photons": (25_000, 100_000, 400_000),
     "cache_seeds": (250, 1000, 4000),
     "gather_rays": (64, 256, 1024),

@@ -19,9 +19,12 @@ import numpy as np
 
 from . import cache, cut, gather, shading_points
 from .device import Device
-from .photons import PhotonMaps, trace_photon_maps
+from .photons import PhotonMaps, PointTree, trace_photon_maps
 from .scene import Scene, scene_digest
 from .settings import RenderSettings
+
+OUTLIER_NEIGHBOURS = 8  # samples a cache sample is compared with
+OUTLIER_RATIO = 4.0  # largest irradiance of a sample over its neighbours' median
 
 
 @dataclass
@@ -102,10 +105,12 @@ def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int
                                  _irradiance_at(the_cut, maps.caustic_map, settings.photon_k), seed=settings.seed)
         ms["gather"] = gathered.stats["ms"]["total"]
         began = time.perf_counter()
-        irradiance, interp = cache.interpolate(device, samples.positions, samples.normals, gathered.irradiance,
+        sample_irradiance, clamped = _clamp_outliers(device, samples.positions, gathered.irradiance)
+        irradiance, interp = cache.interpolate(device, samples.positions, samples.normals, sample_irradiance,
                                                gathered.harmonic_distance, points.positions, points.normals)
         ms["interpolate"] = (time.perf_counter() - began) * 1e3
         stats.update(sample_points=len(samples.indices), cut=the_cut.stats, gather=gathered.stats,
+                     outliers_clamped=clamped,
                      interpolation={k: v for k, v in interp.items() if k != "ms"})
     if maps.caustic_map is not None and len(points.positions):
         began = time.perf_counter()
@@ -114,6 +119,25 @@ def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int
 
     return GiField(*(_grid(points, values) for values in (points.positions, points.normals, irradiance, caustic)),
                    subpixels=points.subpixels, stats=stats)
+
+
+def _clamp_outliers(device: Device, positions: np.ndarray, irradiance: np.ndarray) -> tuple[np.ndarray, int]:
+    """Sample irradiance with lone outliers brought down to OUTLIER_RATIO
+    times the median of their nearest samples. A few gather rays that hit a
+    small, very bright spot (a focused caustic) make one sample far
+    brighter than its neighbours, and interpolation would spread it into a
+    blotch; where the neighbours see the light too, nothing changes."""
+    m = len(positions)
+    if m <= OUTLIER_NEIGHBOURS:
+        return irradiance, 0
+    tree = PointTree.build(device, positions)
+    idx, _ = tree.knn(positions, OUTLIER_NEIGHBOURS + 1)
+    luminance = irradiance.astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    neighbours = np.where(idx[:, 1:] >= 0, luminance[np.maximum(idx[:, 1:], 0)], np.nan)
+    limit = OUTLIER_RATIO * np.nanmedian(neighbours, axis=1)
+    over = luminance > np.maximum(limit, 0.0)
+    scale = np.where(over, limit / np.maximum(luminance, 1e-30), 1.0)
+    return (irradiance * scale[:, None]).astype(np.float32), int(over.sum())
 
 
 def _irradiance_at(the_cut: cut.Cut, caustic_map, k: int):

@@ -34,7 +34,7 @@ class RenderSettings:
     photon_k: int = 50  # nearest photons in one density estimate
     cache_seeds: int = 1600  # irradiance-cache sample points (k-means seeds)
     gather_rays: int = 256  # final-gather rays per sample point
-    cut_delta: float = 0.25  # illumination cut: split a node where |E~ - E| > delta * E
+    cut_delta: float = 1.0  # illumination cut: split a node where |E~ - E| > delta * E
     cache_alpha: float = 0.6  # cache error weight of distance, times the scene's largest side
 
     def validated(self) -> "RenderSettings":
@@ -69,13 +69,13 @@ class RenderSettings:
 # photons, 1.6k-5k seeds, 250-500 gather rays).
 PRESETS: dict[str, dict] = {
     "draft": dict(samples=4, max_bounces=4, diffuse_bounces=1, global_photons=50_000, caustic_photons=20_000,
-                  photon_k=20, cache_seeds=400, gather_rays=64, cut_delta=1.0, cache_alpha=0.6),
+                  photon_k=20, cache_seeds=400, gather_rays=64, cut_delta=2.0, cache_alpha=0.6),
     "preview": dict(samples=16, max_bounces=8, diffuse_bounces=2, global_photons=100_000, caustic_photons=50_000,
-                    photon_k=32, cache_seeds=1000, gather_rays=128, cut_delta=0.5, cache_alpha=0.6),
+                    photon_k=32, cache_seeds=1000, gather_rays=128, cut_delta=1.5, cache_alpha=0.6),
     "final": dict(samples=64, max_bounces=8, diffuse_bounces=4, global_photons=250_000, caustic_photons=100_000,
-                  photon_k=50, cache_seeds=1600, gather_rays=256, cut_delta=0.25, cache_alpha=0.6),
+                  photon_k=50, cache_seeds=1600, gather_rays=256, cut_delta=1.0, cache_alpha=0.6),
     "reference": dict(samples=1024, max_bounces=16, diffuse_bounces=16, global_photons=1_000_000,
-                      caustic_photons=500_000, photon_k=100, cache_seeds=5000, gather_rays=512, cut_delta=0.1,
+                      caustic_photons=500_000, photon_k=100, cache_seeds=5000, gather_rays=512, cut_delta=0.5,
                       cache_alpha=0.6),
 }
 
