@@ -63,7 +63,7 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
             ("GI", "GI", "Photon maps, irradiance cache and final gathering: direct light and mirrors/glass "
              "traced, indirect light and caustics from photons; smooth at few samples"),
         ),
-        default="REFERENCE",
+        default="GI",
     )
     preset: bpy.props.EnumProperty(
         name="Preset",

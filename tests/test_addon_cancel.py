@@ -63,6 +63,7 @@ def probe_scene(bpy_empty, monkeypatch):
     # many more pixels than one kernel batch holds
     scene.render.resolution_x = scene.render.resolution_y = 256
     scene.gpugi.samples = 2
+    scene.gpugi.mode = "REFERENCE"  # progress is counted in kernel batches only
     scene.render.engine = GpuGiRenderEngine.bl_idname
     PROBES.clear()
     return scene

@@ -81,8 +81,9 @@ def test_cli_preset_and_mode_options(small_blend, tmp_path):
     assert run.returncode == 0, run.stderr
     assert "mode: gi" in run.stdout and "warning" not in run.stdout
     assert "photons" in run.stdout and "gather" in run.stdout  # the GI stages' times
-    plain = _cli(small_blend, "-o", tmp_path / "ref.png", "--preset", "draft")
+    plain = _cli(small_blend, "-o", tmp_path / "ref.png", "--preset", "draft", "--mode", "reference")
     assert plain.returncode == 0, plain.stderr
     assert "mode: reference" in plain.stdout and "warning" not in plain.stdout
+    assert "photons" not in plain.stdout
     bad = _cli(small_blend, "-o", tmp_path / "x.png", "--preset", "ultra")
     assert bad.returncode != 0 and "invalid choice" in bad.stderr

@@ -26,6 +26,7 @@ def _cornell(bpy, percent=12, samples=4):
     scene = bpy.context.scene
     scene.render.engine = "GPUGI"
     scene.render.resolution_percentage = percent
+    scene.gpugi.mode = "REFERENCE"
     scene.gpugi.samples, scene.gpugi.diffuse_bounces = samples, 2
     return scene
 

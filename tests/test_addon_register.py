@@ -149,7 +149,7 @@ def test_own_panels_draw_existing_settings(bpy_empty):
     from blender_addon.ui import PANELS
 
     scene = bpy_empty.context.scene
-    scene.gpugi.mode = "GI"  # the Mode panel also draws its warning
+    scene.gpugi.mode = "GI"
     context = SimpleNamespace(scene=scene, view_layer=scene.view_layers[0], engine="GPUGI")
     drawn = []
     for panel in PANELS:

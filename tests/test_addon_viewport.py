@@ -328,7 +328,7 @@ def test_engine_viewport_callbacks_render_and_follow_the_view(bpy_empty):
     pixels, version, width, height = engine._drawer.draws[-1]
     assert (width, height) == (32, 24) and pixels.shape == (24, 32, 4) and version == 2
     assert np.isfinite(pixels).all() and pixels[..., :3].min() > 0  # the lit plane fills the view
-    assert engine.stats[-1].startswith("GPU GI | reference | 2 samples")
+    assert engine.stats[-1].startswith("GPU GI | gi | 2 samples")  # GI is the add-on's default mode
 
     # orbiting only calls view_draw: a new view restarts the worker with the new camera
     far = _viewport_context(bpy, 40, 20, 50.0)
