@@ -54,14 +54,3 @@ def render(bpy, scene, engine: str) -> tuple[np.ndarray, float]:
         finally:
             bpy.data.images.remove(img)
     return pixels[..., :3], seconds
-
-
-def machine() -> str:
-    """CPU model and core count of this machine."""
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"{model}, {os.cpu_count()} cores"

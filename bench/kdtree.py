@@ -21,7 +21,6 @@ import argparse
 import json
 import multiprocessing
 import os
-import platform
 import statistics
 import sys
 import time
@@ -34,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 
 from gpu_core import kdtree  # noqa: E402
 from gpu_core.device import get_device  # noqa: E402
+from machine import describe  # noqa: E402
 
 DEFAULT_SIZES = [1_000, 10_000, 100_000, 650_000, 1_000_000]
 RESULTS = ROOT / "bench" / "results" / "kdtree.json"
@@ -193,19 +193,6 @@ def measure(device, triangles: int, rays: int, repeats: int) -> dict:
 # ---- report -----------------------------------------------------------------------------
 
 
-def machine(device) -> str:
-    """CPU model, core count, current load and the OpenCL device, on one line."""
-    model = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    load = ", load average %.2f" % os.getloadavg()[0] if hasattr(os, "getloadavg") else ""
-    d = device.device
-    return f"{model}, {os.cpu_count()} cores{load}; OpenCL: {d.name.strip()} ({d.max_compute_units} compute units)"
-
-
 def table(rows) -> str:
     """The results as a markdown table, ratios ours / Embree."""
     head = ("triangles", "build ms", "Embree ms", "ratio",
@@ -264,7 +251,7 @@ def main(argv=None) -> int:
         sizes, args.rays, args.repeats = [s for s in sizes if s <= 10_000] or sizes[:1], 1 << 14, 1
 
     device = get_device(args.device)
-    print(machine(device))
+    print(describe(device))
     print(f"rays per kind: {args.rays:,}; median of {args.repeats} run(s) after a warm-up")
     rows = []
     for size in sizes:
@@ -275,7 +262,7 @@ def main(argv=None) -> int:
     print("ratio: ours / Embree (build: lower is better; throughput, against Embree's faster of 1 thread"
           " and 2 processes: higher is better)")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({"machine": machine(device), "rays": args.rays, "repeats": args.repeats,
+    RESULTS.write_text(json.dumps({"machine": describe(device), "rays": args.rays, "repeats": args.repeats,
                                    "rows": rows}, indent=1))
     plot(rows, FIGURE)
     print(f"wrote {RESULTS.relative_to(ROOT)} and {FIGURE.relative_to(ROOT)}")

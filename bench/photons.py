@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import resource
 import statistics
 import sys
@@ -36,6 +35,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from gpu_core.device import get_device  # noqa: E402
+from machine import describe  # noqa: E402
 from gpu_core.photons import PointTree, trace_photon_maps  # noqa: E402
 from gpu_core.scene import LIGHT_AREA, CAMERA_PERSP, Camera, Lights, Materials, Scene  # noqa: E402
 
@@ -171,18 +171,6 @@ def measure(device, points: np.ndarray, n: int, ks: list[int], queries: int, rep
 # ---- report -----------------------------------------------------------------------------
 
 
-def machine(device) -> str:
-    model = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    load = ", load average %.2f" % os.getloadavg()[0] if hasattr(os, "getloadavg") else ""
-    d = device.device
-    return f"{model}, {os.cpu_count()} cores{load}; OpenCL: {d.name.strip()} ({d.max_compute_units} compute units)"
-
-
 def table(trace_row: dict, rows: list[dict]) -> str:
     t = trace_row
     lines = [
@@ -243,7 +231,7 @@ def main(argv=None) -> int:
         sizes, ks, args.queries, args.repeats = [20_000, 50_000], [20, 50], 5_000, 1
 
     device = get_device(args.device)
-    about = machine(device)  # the load average when the run starts
+    about = describe(device)  # the load average when the run starts
     print(about)
     trace_row, points = trace(device, max(sizes), args.repeats)
     rows = [measure(device, points, n, ks, args.queries, args.repeats) for n in sizes if n <= len(points)]

@@ -27,7 +27,8 @@ import sys
 
 import numpy as np
 
-from bpy_render import ROOT, load_bpy, machine, open_scene, render
+from bpy_render import ROOT, load_bpy, open_scene, render
+from machine import describe
 
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 sys.path.insert(0, os.path.join(ROOT, "tests", "references"))
@@ -172,7 +173,7 @@ def main() -> None:
     if args.quick:
         args.size, args.repeats = 64, 1
     bpy = load_bpy()
-    print(f"machine: {machine()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp; "
+    print(f"machine: {describe()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp; "
           f"median of {args.repeats} renders (1 above 64 spp)")
     rows = []
     for name in args.scenes:
