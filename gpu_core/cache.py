@@ -90,15 +90,13 @@ def select_samples(device: Device, positions, normals, pixels, width: int, heigh
         return now
 
     pos4 = frame.to_device(pos)
-    lo, hi = pos4[:, :3].min(axis=0), pos4[:, :3].max(axis=0)
     d_pos, d_nrm, d_pix = device.buffer(pos4), device.buffer(float4(nrm)), device.buffer(pix)
     t = lap("upload", started)
     tree = cache_seeding.build(device, d_pos, d_nrm, d_pix, n, width, height, alpha_n)
     t = lap("quadtree", t)
     seeds, k = cache_seeding.seed(device, tree, d_pos, d_nrm, count, alpha_n, seed)
     t = lap("seeding", t)
-    result = cache_clusters.cluster(device, d_pos, d_nrm, n, seeds, k, lo, hi, alpha_n, max_iterations,
-                                    converge_fraction)
+    result = cache_clusters.cluster(device, d_pos, d_nrm, n, seeds, k, alpha_n, max_iterations, converge_fraction)
     lap("kmeans", t)
     # keep the non-empty clusters, renumbered in order
     kept = np.flatnonzero(result.sample_of >= 0)

@@ -1,7 +1,7 @@
 """k-means clustering of shading points from the seeds (kernels/cache_clusters.cl).
 
 One iteration assigns every shading point to the centre of smallest
-``eps``, found exactly through a uniform grid over the centres, then (but
+``eps``, found exactly through a kd-tree over the centres, then (but
 for the last) moves each centre to its members' mean position and
 normalised mean normal. Iterations stop at ``max_iterations`` or once at
 most ``converge_fraction`` of the points changed cluster. Each cluster's
@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from . import cache_grid
 from .cache_kernels import kernel
 from .cache_sort import group, zeros
 from .device import Device
+from .photons import PointTree
 
 _PROGRAM = "cache_clusters.cl"
 _RESTART_ROUNDS = 3  # rounds of restarting empty clusters after the iterations
@@ -46,22 +46,20 @@ def _k(device: Device, name: str) -> cl.Kernel:
 
 
 def cluster(device: Device, pos: cl.Buffer, nrm: cl.Buffer, n: int, seeds: cl.Buffer, k: int,
-            lo: np.ndarray, hi: np.ndarray, alpha: float, max_iterations: int,
-            converge_fraction: float) -> Clusters:
-    """Cluster ``n`` points (float4 normalised positions/normals inside the
-    box lo..hi) around ``k`` seed points (int buffer of point indices)."""
+            alpha: float, max_iterations: int, converge_fraction: float) -> Clusters:
+    """Cluster ``n`` points (float4 normalised positions/normals) around
+    ``k`` seed points (int buffer of point indices)."""
     queue = device.queue
     cpos, cnrm = device.empty(16 * k), device.empty(16 * k)
     _k(device, "Cache_seed_centres")(queue, (k,), None, seeds, np.int32(k), pos, nrm, cpos, cnrm)
+    tree = _CentreTree(device, cpos, k)
     clusters = device.empty(4 * n)
     cl.enqueue_fill_buffer(queue, clusters, np.full(1, -1, np.int32), 0, 4 * n)
-    assign, update = _k(device, "Cache_assign"), _k(device, "Cache_update_centres")
+    update = _k(device, "Cache_update_centres")
     changed = np.zeros(1, np.int32)
     for iterations in range(1, int(max_iterations) + 1):
-        grid = cache_grid.build(device, cpos, k, lo, hi, k)
         counter = zeros(device, 4)
-        assign(queue, (n,), None, pos, nrm, np.int32(n), cpos, cnrm, *grid.kernel_args(), np.float32(alpha),
-               clusters, counter)
+        tree.assign(pos, nrm, n, cpos, cnrm, alpha, clusters, counter)
         cl.enqueue_copy(queue, changed, counter)
         if iterations == max_iterations or changed[0] <= converge_fraction * n:
             break
@@ -86,9 +84,7 @@ def cluster(device: Device, pos: cl.Buffer, nrm: cl.Buffer, n: int, seeds: cl.Bu
         _k(device, "Cache_move_centres")(queue, (len(empty),), None, device.buffer(empty), device.buffer(donors),
                                          np.int32(len(empty)), pos, nrm, cpos, cnrm)
         restarts += len(empty)
-        grid = cache_grid.build(device, cpos, k, lo, hi, k)
-        assign(queue, (n,), None, pos, nrm, np.int32(n), cpos, cnrm, *grid.kernel_args(), np.float32(alpha),
-               clusters, zeros(device, 4))
+        tree.assign(pos, nrm, n, cpos, cnrm, alpha, clusters, zeros(device, 4))
     cluster_of = np.empty(n, np.int32)
     c4, n4 = np.empty((k, 4), np.float32), np.empty((k, 4), np.float32)
     for host, buf in ((cluster_of, clusters), (c4, cpos), (n4, cnrm)):
@@ -104,6 +100,29 @@ def cluster(device: Device, pos: cl.Buffer, nrm: cl.Buffer, n: int, seeds: cl.Bu
         converged=changed[0] <= converge_fraction * n,
         restarts=restarts,
     )
+
+
+class _CentreTree:
+    """The point kd-tree over the ``k`` centres, built once where they start
+    (the seeds). Before each assignment every node's box is refit to where
+    its centres have moved, which keeps the search exact without a rebuild
+    per iteration (a build is many small launches, slower than the refit)."""
+
+    def __init__(self, device: Device, cpos: cl.Buffer, k: int):
+        start = np.empty((k, 4), np.float32)
+        cl.enqueue_copy(device.queue, start, cpos)
+        self.device = device
+        self.tree = PointTree.build(device, start[:, :3])
+        self.boxes = device.empty(32 * self.tree.node_count)  # lo, hi float4 per node
+
+    def assign(self, pos, nrm, n: int, cpos, cnrm, alpha: float, clusters, changed) -> None:
+        """Each point joins its centre of smallest eps (Cache_assign);
+        ``changed`` counts the points whose cluster changed."""
+        queue, tree = self.device.queue, self.tree
+        _k(self.device, "Cache_tree_boxes")(queue, (tree.node_count,), None, *tree.kernel_args(),
+                                            tree.node_buffer, np.int32(tree.node_count), cpos, self.boxes)
+        _k(self.device, "Cache_assign")(queue, (n,), None, pos, nrm, np.int32(n), cpos, cnrm, *tree.kernel_args(),
+                                        self.boxes, np.float32(alpha), clusters, changed)
 
 
 def _restart_points(device: Device, members, pos, nrm, k: int, cpos, cnrm, alpha: float) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Uniform grid over points on the device (kernels/cache_grid.cl).
 
 Used where the irradiance cache needs the exact nearest of a few thousand
-points under a metric bounded below by a multiple of distance: the k-means
-centres and the interpolation fallback. The kernels visit cells in growing
+points under a metric bounded below by a multiple of distance: the
+interpolation fallback. The kernels visit cells in growing
 rings (cache_common.h) and stop once no unvisited cell can hold a better
 point, so the answer equals a brute-force search.
 """
