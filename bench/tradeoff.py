@@ -184,11 +184,14 @@ def main() -> None:
                   f"display rel. RMSE {r['error']:.4f}   linear {r['linear']:.4f}")
         print("  " + target(scene_rows))
         rows += scene_rows
+    # the 64 px run is the README's; other sizes get their own files
+    suffix = "" if args.size == 64 else f"_{args.size}"
     os.makedirs(RESULTS, exist_ok=True)
-    with open(os.path.join(RESULTS, "tradeoff.json"), "w") as f:
+    with open(os.path.join(RESULTS, f"tradeoff{suffix}.json"), "w") as f:
         json.dump(rows, f, indent=1)
-    plot(rows, FIGURE)
-    print(f"plot: {FIGURE}")
+    figure = FIGURE.replace(".png", f"{suffix}.png")
+    plot(rows, figure)
+    print(f"plot: {figure}")
 
 
 if __name__ == "__main__":
