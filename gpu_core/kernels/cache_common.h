@@ -1,9 +1,10 @@
 /* Shared device code of the irradiance cache: the illumination-change error,
- * a hash for per-node random numbers, and the uniform grid whose cells are
+ * per-node random numbers (rng.h's hash), and the uniform grid whose cells are
  * visited in growing rings for exact nearest searches. Positions here are
  * normalised by the host (box centre at 0, largest side 1). */
 #ifndef GPUGI_CACHE_COMMON_H
 #define GPUGI_CACHE_COMMON_H
+#include "rng.h"
 
 /* |n - nc|: for unit normals the chord sqrt(2 - 2 n . nc), without the
  * cancellation that formula suffers when the normals nearly agree. */
@@ -35,19 +36,9 @@ inline float Cache_tie_window(float e_min) {
     return e_min + CACHE_TIE * (1.0f + e_min);
 }
 
-/* Integer hash with good avalanche (lowbias32). */
-inline uint Cache_hash(uint x) {
-    x ^= x >> 16;
-    x *= 0x7feb352dU;
-    x ^= x >> 15;
-    x *= 0x846ca68bU;
-    x ^= x >> 16;
-    return x;
-}
-
 /* Uniform float in [0, 1) for the triple (a, b, c). */
 inline float Cache_random(uint a, uint b, uint c) {
-    uint h = Cache_hash(a ^ Cache_hash(b ^ Cache_hash(c + 0x9e3779b9U)));
+    uint h = Rng_hash(a ^ Rng_hash(b ^ Rng_hash(c + 0x9e3779b9U)));
     return (float)(h >> 8) * (1.0f / 16777216.0f);
 }
 

@@ -31,7 +31,7 @@ inline int4 Cache_level_cell(float3 x, int g) {
 /* Hash-table slot of a cell. */
 inline uint Cache_bucket(int4 cell, uint mask) {
     uint h = (uint)cell.x * 73856093U ^ (uint)cell.y * 19349663U ^ (uint)cell.z * 83492791U;
-    return Cache_hash(h ^ (uint)cell.w * 2654435761U) & mask;
+    return Rng_hash(h ^ (uint)cell.w * 2654435761U) & mask;
 }
 
 /* Each sample's level cell, its hash slot, and the set of levels in use. */
