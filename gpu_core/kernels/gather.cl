@@ -54,15 +54,9 @@ __kernel void Gather_rays(KDTREE_PARAMS, SURFACE_PARAMS, const __global float4 *
             out_albedo[g] = (float4)(throughput * base * diffuse * m.base_color.w, 0.0f);
             return;
         }
-        bool refracted = false;
-        if (Bsdf_pick(&m, Rng_next(&rng)) == BSDF_MIRROR) {
-            dir = Bsdf_mirror(dir, sp.ns, sp.ng);
-            throughput *= base;
-        } else {
-            bool entering = dot(sp.ng_raw, sp.ng) > 0.0f;
-            dir = Bsdf_glass(dir, sp.ns, sp.ng, entering, m.ior, Rng_next(&rng), &refracted);
-            if (refracted) throughput *= base;
-        }
-        org = sp.p + (refracted ? -sp.eps : sp.eps) * sp.ng;
+        bool refracted;
+        int lobe = Bsdf_pick(&m, Rng_next(&rng));
+        float u = lobe == BSDF_GLASS ? Rng_next(&rng) : 0.0f;
+        throughput *= Surface_specular(&sp, &m, lobe, base, u, &dir, &org, &refracted);
     }
 }

@@ -113,16 +113,11 @@ __kernel void Photon_trace(KDTREE_PARAMS, const __global float4 *tri_normals,
             continue;
         }
         if (bounces >= max_bounces) break;
-        bool refracted = false;
-        if (lobe == BSDF_MIRROR) {
-            dir = Bsdf_mirror(dir, sp.ns, sp.ng);
-            if (!Photon_roulette(base, &power, &rng)) break;
-        } else {
-            bool entering = dot(sp.ng_raw, sp.ng) > 0.0f;
-            dir = Bsdf_glass(dir, sp.ns, sp.ng, entering, m.ior, Rng_next(&rng), &refracted);
-            if (refracted && !Photon_roulette(base, &power, &rng)) break;
-        }
-        org = sp.p + (refracted ? -sp.eps : sp.eps) * sp.ng;
+        bool refracted;
+        float u = lobe == BSDF_GLASS ? Rng_next(&rng) : 0.0f;
+        float3 tint = Surface_specular(&sp, &m, lobe, base, u, &dir, &org, &refracted);
+        /* a glass reflection keeps all the power: no roulette */
+        if ((lobe == BSDF_MIRROR || refracted) && !Photon_roulette(tint, &power, &rng)) break;
         /* specular straight from the light starts a caustic path */
         caustic = bounces == 0 || caustic;
         bounces++;

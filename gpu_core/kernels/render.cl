@@ -288,19 +288,11 @@ __kernel void Render_pixels(KDTREE_PARAMS, const __global float4 *tri_normals,
                 continue;
             }
             if (bounces >= max_bounces + max_diffuse) break;
-            bool refracted = false;
-            if (lobe == BSDF_MIRROR) {
-                dir = Bsdf_mirror(dir, sp.ns, sp.ng);
-                throughput *= base;
-            } else {
-                /* the wound normal facing the ray means entering the object */
-                bool entering = dot(sp.ng_raw, sp.ng) > 0.0f;
-                dir = Bsdf_glass(dir, sp.ns, sp.ng, entering, m.ior, Rng_next(&rng), &refracted);
-                if (refracted) throughput *= base;
-            }
+            bool refracted;
+            float u = lobe == BSDF_GLASS ? Rng_next(&rng) : 0.0f;
+            throughput *= Surface_specular(&sp, &m, lobe, base, u, &dir, &org, &refracted);
             if (bounces == 0) first_pass = refracted ? PASS_TRANSMISSION : PASS_GLOSSY;
             caustic = diffuse > 0;
-            org = sp.p + (refracted ? -sp.eps : sp.eps) * sp.ng;
             tmin = 0.0f;
             tmax = RAY_FAR;
             bounces++;
