@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scenes_py import camera_looking_down, make_scene, quad
 
-from gpu_core import gather, shading_points
+from gpu_core import gather, gi, shading_points
 from gpu_core.renderer import Renderer
 from gpu_core.scene import LIGHT_POINT, Lights, Materials
 from gpu_core.settings import RenderSettings
@@ -167,3 +167,23 @@ def test_scaled_and_moved_scenes_give_the_unit_scene_image(device, size, offset)
     assert np.isfinite(image).all()
     assert abs(image.mean() / unit.mean() - 1.0) < 0.03
     assert np.sqrt(((image - unit) ** 2).mean()) / unit.mean() < 0.1
+
+
+def test_a_lone_bright_cache_sample_is_brought_down_to_its_neighbours(device):
+    rng = np.random.default_rng(3)
+    positions = np.zeros((400, 3), np.float32)
+    positions[:, :2] = rng.uniform(-1, 1, (400, 2))
+    positions[7, :2] = (-0.8, -0.8)
+    irradiance = np.ones((400, 3), np.float32)
+    irradiance[7] = 100.0  # one sample saw a focused caustic
+    bright = np.linalg.norm(positions[:, :2] - [0.5, 0.5], axis=1) < 0.35
+    irradiance[bright] = 50.0  # a lit patch many samples see
+    clamped, count = gi._clamp_outliers(device, positions, irradiance)
+    np.testing.assert_allclose(clamped[7], gi.OUTLIER_RATIO, rtol=1e-5)
+    # the patch stays lit where its samples' neighbours are in it too
+    d = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2)
+    nearest = np.argsort(d, axis=1)[:, 1:gi.OUTLIER_NEIGHBOURS + 1]
+    inner = bright & bright[nearest].all(axis=1)
+    assert inner.sum() > 10 and np.all(clamped[inner] == 50.0)
+    assert np.all(clamped[~bright & (np.arange(400) != 7)] == 1.0)
+    assert count >= 1
