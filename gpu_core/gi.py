@@ -49,15 +49,14 @@ class PhotonReuse:
         self._key: bytes | None = None
         self._maps: PhotonMaps | None = None
 
-    def maps(self, device: Device, scene: Scene, settings: RenderSettings, tree=None) -> tuple[PhotonMaps, bool]:
-        """The photon maps for ``scene`` (traced through ``tree``, its
-        triangle kd-tree in the renderer's frame, when given), and whether
-        they were reused."""
+    def maps(self, device: Device, scene: Scene, settings: RenderSettings, up=None) -> tuple[PhotonMaps, bool]:
+        """The photon maps for ``scene`` (traced through the renderer's
+        upload ``up`` when given), and whether they were reused."""
         key = _photon_key(scene, settings)
         if key == self._key and self._maps is not None:
             return self._maps, True
         self._maps = trace_photon_maps(device, scene, settings.global_photons, settings.caustic_photons,
-                                       seed=settings.seed, k_hint=settings.photon_k, triangle_tree=tree)
+                                       seed=settings.seed, k_hint=settings.photon_k, uploaded=up)
         self._key = key
         return self._maps, False
 
@@ -79,7 +78,7 @@ def render_gi(device: Device, scene: Scene, up, window: tuple[int, int, int, int
     stats: dict = {"ms": ms}
 
     began = time.perf_counter()
-    maps, reused = (reuse or PhotonReuse()).maps(device, scene, settings, up.tree)
+    maps, reused = (reuse or PhotonReuse()).maps(device, scene, settings, up)
     ms["photons"] = (time.perf_counter() - began) * 1e3
     stats.update(photons=maps.stats, photons_reused=reused)
 

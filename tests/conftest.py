@@ -51,3 +51,22 @@ def render_to_array(bpy, scene, engine: str, path: str) -> np.ndarray:
         return np.array(img.pixels[:], np.float32).reshape(img.size[1], img.size[0], 4)
     finally:
         bpy.data.images.remove(img)
+
+
+def render_multilayer(bpy, scene, engine: str, path) -> dict[str, np.ndarray]:
+    """Render ``scene`` with ``engine`` to an uncompressed multilayer EXR and
+    read every channel back: name -> (H, W) float32, rows from the bottom."""
+    from exr_channels import read_exr_channels
+
+    settings = scene.render.image_settings
+    settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format, settings.color_depth, settings.exr_codec = "OPEN_EXR_MULTILAYER", "32", "NONE"
+    scene.render.engine = engine
+    scene.render.filepath, scene.render.use_file_extension = str(path), False
+    bpy.ops.render.render(write_still=True)
+    return read_exr_channels(path)
+
+
+def pass_rgb(channels: dict, name: str) -> np.ndarray:
+    """A colour pass of a multilayer render as (H, W, 3) float64."""
+    return np.stack([channels[f"ViewLayer.{name}.{c}"] for c in "RGB"], axis=-1).astype(np.float64)

@@ -7,8 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import ROOT
-from exr_channels import read_exr_channels
+from conftest import ROOT, pass_rgb, render_multilayer
 
 from blender_addon.final import LAST_RUN
 from blender_addon.passes import PASSES, enabled_passes
@@ -39,17 +38,10 @@ def _enable_all(view_layer):
 
 
 def _render_multilayer(bpy, scene, path):
-    settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
-    settings.file_format, settings.color_depth, settings.exr_codec = "OPEN_EXR_MULTILAYER", "32", "NONE"
-    scene.render.filepath, scene.render.use_file_extension = str(path), False
-    bpy.ops.render.render(write_still=True)
+    channels = render_multilayer(bpy, scene, "GPUGI", path)
     assert not LAST_RUN.get("error"), LAST_RUN
-    return read_exr_channels(path)
+    return channels
 
-
-def _rgb(channels, name):
-    return np.stack([channels[f"ViewLayer.{name}.{c}"] for c in "RGB"], axis=-1).astype(np.float64)
 
 
 def test_toggles_decide_the_registered_passes(bpy_module):
@@ -72,12 +64,12 @@ def test_light_passes_in_the_saved_file_add_up_to_combined(bpy_module, tmp_path)
     _enable_all(scene.view_layers[0])
     channels = _render_multilayer(bpy_module, scene, tmp_path / "passes.exr")
     assert set(LAST_RUN["passes"]) == {"Combined"} | {spec.name for spec in PASSES[3:]}
-    combined = _rgb(channels, "Combined")
-    total = sum(_rgb(channels, name) for name in SUMMED)
+    combined = pass_rgb(channels, "Combined")
+    total = sum(pass_rgb(channels, name) for name in SUMMED)
     np.testing.assert_allclose(total, combined, rtol=1e-5, atol=1e-6)
     for name in ("Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Transmission Indirect"):
-        assert _rgb(channels, name).mean() > 1e-3, name
-    assert 0.0 < _rgb(channels, "Caustics").mean() < _rgb(channels, "Diffuse Indirect").mean() + 0.1
+        assert pass_rgb(channels, name).mean() > 1e-3, name
+    assert 0.0 < pass_rgb(channels, "Caustics").mean() < pass_rgb(channels, "Diffuse Indirect").mean() + 0.1
     assert channels["ViewLayer.Denoising Albedo.R"].max() > 0.5
 
 
@@ -136,11 +128,11 @@ def test_gi_mode_light_passes_add_up_to_combined(bpy_module, tmp_path):
     _enable_all(scene.view_layers[0])
     channels = _render_multilayer(bpy_module, scene, tmp_path / "gi.exr")
     assert LAST_RUN["stats"]["mode"] == "gi" and not LAST_RUN["warnings"]
-    combined = _rgb(channels, "Combined")
-    np.testing.assert_allclose(sum(_rgb(channels, name) for name in SUMMED), combined, rtol=1e-5, atol=1e-5)
+    combined = pass_rgb(channels, "Combined")
+    np.testing.assert_allclose(sum(pass_rgb(channels, name) for name in SUMMED), combined, rtol=1e-5, atol=1e-5)
     # the cache's indirect light lands in Diffuse Indirect (and, seen in the mirror, Glossy Indirect)
     for name in ("Diffuse Indirect", "Glossy Indirect", "Caustics"):
-        assert _rgb(channels, name).mean() > 1e-3, name
+        assert pass_rgb(channels, name).mean() > 1e-3, name
 
 
 def test_preset_sets_its_values_and_an_edit_makes_it_custom(bpy_empty):

@@ -5,8 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import ROOT, render_to_array
-from exr_channels import read_exr_channels
+from conftest import ROOT, render_multilayer, render_to_array
 
 from blender_addon.final import LAST_RUN
 
@@ -80,13 +79,7 @@ def _sphere_on_plane(bpy):
 
 
 def _render_passes(bpy, scene, engine, path):
-    settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
-    settings.file_format, settings.color_depth, settings.exr_codec = "OPEN_EXR_MULTILAYER", "32", "NONE"
-    scene.render.engine = engine
-    scene.render.filepath, scene.render.use_file_extension = str(path), False
-    bpy.ops.render.render(write_still=True)
-    channels = read_exr_channels(path)
+    channels = render_multilayer(bpy, scene, engine, path)
     depth = channels["ViewLayer.Depth.Z"]
     normal = np.stack([channels[f"ViewLayer.Normal.{c}"] for c in "XYZ"], axis=-1)
     return depth, normal

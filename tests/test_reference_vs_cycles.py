@@ -27,8 +27,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import ROOT
-from exr_channels import read_exr_channels
+from conftest import ROOT, pass_rgb, render_multilayer
 
 from blender_addon.final import LAST_RUN
 
@@ -78,16 +77,8 @@ def _cornell_box(bpy):
 
 def _render(bpy, scene, engine: str, path) -> dict:
     """Render with ``engine`` to a multilayer EXR: pass name -> (H, W, 3) float64."""
-    settings = scene.render.image_settings
-    settings.media_type = "MULTI_LAYER_IMAGE"
-    settings.file_format, settings.color_depth, settings.exr_codec = "OPEN_EXR_MULTILAYER", "32", "NONE"
-    scene.render.engine = engine
-    scene.render.filepath, scene.render.use_file_extension = str(path), False
-    bpy.ops.render.render(write_still=True)
-    channels = read_exr_channels(path)
-    names = {key.split(".")[1] for key in channels}
-    return {name: np.stack([channels[f"ViewLayer.{name}.{c}"] for c in "RGB"], axis=-1).astype(np.float64)
-            for name in names}
+    channels = render_multilayer(bpy, scene, engine, path)
+    return {name: pass_rgb(channels, name) for name in {key.split(".")[1] for key in channels}}
 
 
 def _light_of(passes: dict, kind: str, part: str, colour_passes: bool) -> float:

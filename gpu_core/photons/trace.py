@@ -50,7 +50,8 @@ class PhotonMaps:
 
 @dataclass
 class _SceneBuffers:
-    """What the trace kernel reads about the scene."""
+    """What the trace kernel reads about the scene (the renderer's upload
+    has the same fields and can stand in for it)."""
 
     tree: kdtree.KdTree
     normals: cl.Buffer
@@ -167,14 +168,15 @@ def trace_photon_maps(
     seed: int = 0,
     max_bounces: int = 8,
     k_hint: float = 50.0,
-    triangle_tree: kdtree.KdTree | None = None,
+    uploaded=None,
 ) -> PhotonMaps:
     """Trace both photon maps of ``scene`` with the given numbers of
     emitted photons; each map is a PointTree with photon attributes.
     ``max_bounces``: scattering events per path; ``k_hint``: the k the
-    point trees are tuned for; ``triangle_tree``: the scene's kd-tree when
-    the caller has one (built over the validated scene's triangles minus
-    the centre of its bounds, as the renderer builds it)."""
+    point trees are tuned for; ``uploaded``: the scene already on the
+    device when the caller has it (the renderer's upload: kd-tree and
+    tables in the same frame, the centre of the validated scene's bounds),
+    so nothing is built or uploaded again."""
     ms: dict[str, float] = {}
     start = time.perf_counter()
     scene = validate(scene)
@@ -202,12 +204,14 @@ def trace_photon_maps(
     maps = {"global": None, "caustic": None}
     traced = [name for name in ("global", "caustic") if name not in reasons]
     if traced:
-        start = time.perf_counter()
-        tree = triangle_tree or kdtree.build(device, (scene.triangles - center).astype(np.float32))
-        ms["kdtree"] = (time.perf_counter() - start) * 1e3
-        start = time.perf_counter()
-        buffers = _upload(device, scene, tree, table, emit_tris, emit_cdf)
-        ms["upload"] = (time.perf_counter() - start) * 1e3
+        buffers = uploaded
+        if buffers is None:
+            start = time.perf_counter()
+            tree = kdtree.build(device, (scene.triangles - center).astype(np.float32))
+            ms["kdtree"] = (time.perf_counter() - start) * 1e3
+            start = time.perf_counter()
+            buffers = _upload(device, scene, tree, table, emit_tris, emit_cdf)
+            ms["upload"] = (time.perf_counter() - start) * 1e3
     for name in ("global", "caustic"):
         if name not in traced:
             stats["maps"][name] = reasons[name]
