@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from gpu_core import kdtree  # noqa: E402
+from gpu_core.accel import kdtree  # noqa: E402
 from gpu_core.device import get_device  # noqa: E402
 from machine import describe  # noqa: E402
 

@@ -36,7 +36,8 @@ sys.path.insert(0, str(ROOT))
 
 from gpu_core.device import get_device  # noqa: E402
 from machine import describe  # noqa: E402
-from gpu_core.photons import PointTree, trace_photon_maps  # noqa: E402
+from gpu_core.accel.point_tree import PointTree  # noqa: E402
+from gpu_core.photons import trace_photon_maps  # noqa: E402
 from gpu_core.scene import LIGHT_AREA, CAMERA_PERSP, Camera, Lights, Materials, Scene  # noqa: E402
 
 DEFAULT_SIZES = [100_000, 300_000, 1_000_000, 3_000_000]

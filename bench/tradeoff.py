@@ -9,7 +9,7 @@ its main knobs (photons, cache points, gather rays, k) from the Preview
 preset. Each configuration's render time (median of --repeats, the bpy
 render call including export) and its error against the reference go into
 a table and a log-log plot, bench/figures/tradeoff.png. The error is the
-relative RMSE of display values (the metric of tests/test_gi_vs_cycles.py);
+relative RMSE of display values (the metric of tests/gi/test_gi_vs_cycles.py);
 the linear-light relative RMSE is printed beside it.
 
     python bench/tradeoff.py [--scenes cornell_box box_torus caustics]
@@ -30,7 +30,7 @@ import numpy as np
 from bpy_render import ROOT, load_bpy, open_scene, render
 from machine import describe
 
-sys.path.insert(0, os.path.join(ROOT, "tests"))
+sys.path.insert(0, os.path.join(ROOT, "tests", "gi"))
 sys.path.insert(0, os.path.join(ROOT, "tests", "references"))
 from make_references import configure as cycles_reference_settings  # noqa: E402
 from test_gi_vs_cycles import display  # noqa: E402

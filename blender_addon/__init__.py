@@ -1,4 +1,9 @@
-"""GPU GI: a render engine computing global illumination in OpenCL kernels."""
+"""GPU GI: a render engine computing global illumination in OpenCL kernels.
+
+The same folder works as an extension (Blender 4.2+, installed from a zip
+that carries gpu_core and pyopencl's wheels) and as a legacy add-on folder
+beside gpu_core (the repository, also when Blender reaches it through a link).
+"""
 
 bl_info = {
     "name": "GPU GI",
@@ -10,40 +15,73 @@ bl_info = {
     "category": "Render",
 }
 
+import importlib.util
 import os
 import sys
 
-# gpu_core lives beside this package in the source tree (also when Blender
-# loads the add-on through a link to this folder)
-_ROOT = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
-if _ROOT not in sys.path:
-    sys.path.append(_ROOT)
+_HERE = os.path.dirname(os.path.realpath(__file__))
 
-import bpy  # noqa: E402
 
-from . import properties, ui  # noqa: E402
-from .engine import GpuGiRenderEngine  # noqa: E402
+def _import_gpu_core() -> None:
+    """Make ``import gpu_core`` find the gpu_core this add-on came with."""
+    bundled = os.path.join(_HERE, "gpu_core")
+    if not os.path.isdir(bundled):
+        # the repository: gpu_core is beside this folder
+        root = os.path.dirname(_HERE)
+        if root not in sys.path:
+            sys.path.append(root)
+        return
+    # the extension: gpu_core is inside this folder; load it as the top-level
+    # package without putting this folder's module names on sys.path (once:
+    # Blender re-runs this file, but not the modules it imported, after an update)
+    if "gpu_core" in sys.modules:
+        return
+    init = os.path.join(bundled, "__init__.py")
+    spec = importlib.util.spec_from_file_location("gpu_core", init, submodule_search_locations=[bundled])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["gpu_core"] = module
+    spec.loader.exec_module(module)
 
+
+_import_gpu_core()
+
+# The modules that need Blender are imported in register(): building the
+# extension zips (python -m blender_addon build-extension) needs neither
+# Blender nor OpenCL.
 _registered = False
 
 
 def register():
-    """Register settings, engine and panels (a second call does nothing)."""
+    """Point the kernel caches, register settings, engine, panels and preferences (a second call does nothing)."""
     global _registered
     if _registered:
         return
+    import bpy
+
+    from . import cache_dirs, preferences, properties, ui
+    from .engine import GpuGiRenderEngine
+
+    cache_dirs.configure(__package__)
     properties.register()
     bpy.utils.register_class(GpuGiRenderEngine)
     ui.register()
+    preferences.register()
     _registered = True
 
 
 def unregister():
-    """Remove panels, engine and settings (a second call does nothing)."""
+    """Remove preferences, panels, engine and settings (a second call does nothing)."""
     global _registered
     if not _registered:
         return
+    import bpy
+
+    from . import cache_dirs, preferences, properties, ui
+    from .engine import GpuGiRenderEngine
+
+    preferences.unregister()
     ui.unregister()
     bpy.utils.unregister_class(GpuGiRenderEngine)
     properties.unregister()
+    cache_dirs.restore()
     _registered = False

@@ -2,10 +2,12 @@
 
     python -m blender_addon render FILE.blend -o OUT.png|OUT.exr [--frame N]
         [--preset draft|preview|final|reference] [--mode reference|gi]
-        [--samples N] [--resolution-percentage P] [--device SPEC]
+        [--samples N] [--KNOB VALUE ...] [--resolution-percentage P] [--device SPEC]
 
-Prints the mode, the image's path and each stage's time; on an error, prints
-one line and exits non-zero. --samples applies after --preset.
+Every knob of gpu_core's RenderSettings is an option (--global-photons,
+--gather-rays, ...); they apply after --preset. Prints the mode, the
+image's path, each stage's time and the bytes moved to and from the device;
+on an error, prints one line and exits non-zero.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import argparse
 import os
 import sys
 
-from gpu_core.settings import MODES, PRESETS
+from gpu_core.settings import PRESETS, knobs
 
 # output extension -> Blender file format
 FORMATS = {".png": "PNG", ".exr": "OPEN_EXR", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}
@@ -32,20 +34,36 @@ def parse_args(argv):
     render.add_argument("-o", "--output", required=True, help="image to write: " + ", ".join(FORMATS))
     render.add_argument("--frame", type=int, default=None, help="frame to render (default: the file's current frame)")
     render.add_argument("--preset", choices=list(PRESETS), default=None,
-                        help="speed/accuracy step: samples, bounces and the GI knobs")
-    render.add_argument("--mode", choices=list(MODES), default=None,
-                        help="reference (path tracer) or gi (photon maps, irradiance cache, final gathering)")
-    render.add_argument("--samples", type=_positive, default=None, help="camera paths per pixel")
-    render.add_argument("--resolution-percentage", type=_positive, default=None, help="scale of the file's resolution")
+                        help="speed/accuracy step: samples, bounces and the GI knobs (the options below apply after it)")
+    for knob in knobs():
+        _add_knob(render, knob)
+    render.add_argument("--resolution-percentage", type=_bounded(int, 1), default=None,
+                        help="scale of the file's resolution")
     render.add_argument("--device", default=None, help="OpenCL device: 'cpu', 'gpu', a platform name part or 'P:D'")
     return parser.parse_args(argv)
 
 
-def _positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text} is not a positive integer")
-    return value
+def _add_knob(parser, knob) -> None:
+    """``--name`` for a RenderSettings knob, typed and bounded by its declaration."""
+    meta = knob.metadata
+    option = "--" + knob.name.replace("_", "-")
+    if meta["items"]:
+        parser.add_argument(option, choices=[value for value, _, _ in meta["items"]], default=None,
+                            help=meta["description"])
+        return
+    kind = float if isinstance(knob.default, float) else int
+    parser.add_argument(option, type=_bounded(kind, meta["minimum"], meta["maximum"]), default=None,
+                        help=f"{meta['description']} (default {knob.default})")
+
+
+def _bounded(kind, minimum=None, maximum=None):
+    """An argparse type: ``kind`` within [minimum, maximum]."""
+    def parse(text: str):
+        value = kind(text)
+        if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+            raise argparse.ArgumentTypeError(f"{text} is outside {minimum}..{maximum}")
+        return value
+    return parse
 
 
 def main(argv=None) -> int:
@@ -55,13 +73,17 @@ def main(argv=None) -> int:
     except CliError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
-    from .status import format_stage_times, mode_line
+    from .status import format_stage_times, format_transfers, mode_line
 
     for warning in warnings:
         print(f"warning: {warning}")
     print(f"device: {stats.get('device', 'unknown')}")
     print(f"mode: {mode_line(stats)}")
+    if "plan" in stats:
+        print(f"plan: {', '.join(stats['plan'])}")
     print(f"stages: {format_stage_times(stats.get('ms', {}))}")
+    if "transfers" in stats:
+        print(f"transfers: {format_transfers(stats['transfers'])}")
     print(f"image: {output}")
     return 0
 
@@ -92,10 +114,10 @@ def render_file(args) -> tuple[dict, list[str], str]:
         scene.frame_set(args.frame)
     if args.preset is not None:
         scene.gpugi.preset = args.preset.upper()
-    if args.mode is not None:
-        scene.gpugi.mode = args.mode.upper()
-    if args.samples is not None:
-        scene.gpugi.samples = args.samples
+    for knob in knobs():
+        value = getattr(args, knob.name)
+        if value is not None:
+            setattr(scene.gpugi, knob.name, value.upper() if isinstance(value, str) else value)
     if args.resolution_percentage is not None:
         scene.render.resolution_percentage = args.resolution_percentage
     if args.device is not None:

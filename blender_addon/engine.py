@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import bpy
 
-from gpu_core.errors import GpuGiError
+from gpu_core.errors import DeviceError, GpuGiError
 
 from .display import ViewportDrawer
 from .export import export_scene
 from .final import render_final
+from .opencl_devices import survey
 from .passes import enabled_passes
+from .preferences import device_spec
 from .viewport import Job, ViewportSession, view_state
 
 
@@ -58,10 +60,12 @@ class GpuGiRenderEngine(bpy.types.RenderEngine):
                 self._viewport = ViewportSession(self.tag_redraw)
             scene = depsgraph.scene
             view = view_state(context)
+            if survey().problem:
+                raise DeviceError(survey().problem)
             job = Job(
                 scene=export_scene(depsgraph, camera=view.camera),
                 settings=scene.gpugi.render_settings(preview=True, transparent=scene.render.film_transparent),
-                device_spec=scene.gpugi.device or None,
+                device_spec=device_spec(scene),
                 pixel_size=self.get_preview_pixel_size(scene),
             )
             self._viewport.update_scene(job, view.signature)

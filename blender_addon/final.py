@@ -10,11 +10,10 @@ import time
 
 import numpy as np
 
-from gpu_core.device import get_device
-from gpu_core.errors import GpuGiError, RenderCancelled
-from gpu_core.renderer import Renderer
+from gpu_core.errors import DeviceError, GpuGiError, RenderCancelled
 
 from .export import export_scene
+from .opencl_devices import survey
 from .passes import enabled_passes, wants_denoising_passes, wants_light_passes
 from .status import format_stage_times, mode_line
 
@@ -63,16 +62,31 @@ def _render(engine, depsgraph):
         raise RenderCancelled("render cancelled")
     engine.update_stats("", "GPU GI | opening the OpenCL device")
     started = time.perf_counter()
-    device = get_device(scene.gpugi.device or None)
+    device = open_device(scene)
     device_ms = (time.perf_counter() - started) * 1e3
 
     def progress(fraction: float, message: str) -> None:
         engine.update_progress(fraction)
         engine.update_stats("", f"GPU GI | {message}")
 
+    from gpu_core.renderer import Renderer
+
     result = Renderer(device).render(gscene, settings, progress=progress, should_stop=engine.test_break)
     result.stats["ms"] = {"export": export_ms, "device": device_ms, **result.stats["ms"]}
     return result
+
+
+def open_device(scene):
+    """The OpenCL device a render of ``scene`` uses (its own setting, else the
+    preferences' choice); with no OpenCL at all, a one-line DeviceError
+    saying what to install."""
+    if survey().problem:
+        raise DeviceError(survey().problem)
+    from gpu_core.device import get_device
+
+    from .preferences import device_spec
+
+    return get_device(device_spec(scene))
 
 
 def write_passes(engine, passes: dict, view_layer) -> list[str]:

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from gpu_core.image import DENOISING_PASSES, LIGHT_PASSES
+
 
 class PassSpec(NamedTuple):
     name: str  # Blender's pass name (the compositor socket)
@@ -37,8 +39,8 @@ PASSES = (
     PassSpec("Denoising Albedo", "RGB", "COLOR", "cycles.denoising_store_passes"),
     PassSpec("Denoising Depth", "Z", "VALUE", "cycles.denoising_store_passes"),
 )
-LIGHT_PASS_NAMES = {p.name for p in PASSES[3:12]}
-DENOISING_PASS_NAMES = {p.name for p in PASSES[12:]}
+LIGHT_PASS_NAMES = set(LIGHT_PASSES)
+DENOISING_PASS_NAMES = set(DENOISING_PASSES)
 
 
 def is_enabled(view_layer, spec: PassSpec) -> bool:

@@ -1,12 +1,18 @@
-"""Render settings stored in the .blend at scene.gpugi (and view_layer.gpugi)."""
+"""Render settings stored in the .blend at scene.gpugi (and view_layer.gpugi).
+
+Every knob is made from its declaration in gpu_core's RenderSettings (label,
+description, range, default: gpu_core/settings.py); only what the add-on
+alone has (the OpenCL device string, the preset choice, a pass toggle) is
+declared here.
+"""
 
 from __future__ import annotations
 
 import bpy
 
-from gpu_core.settings import PRESETS, RenderSettings
+from gpu_core.settings import PRESETS, RenderSettings, knobs
 
-_GI_ONLY = " (GI mode only)"
+_PRESET_KEYS = set(PRESETS["draft"])
 
 # True while a preset writes its values, so those writes keep the preset
 _applying_preset = False
@@ -45,25 +51,36 @@ def _refresh_passes(settings, _context) -> None:
             view_layer.update_render_passes()
 
 
+def knob_property(f):
+    """The bpy property of one RenderSettings knob, from its metadata."""
+    meta = f.metadata
+    common = dict(name=meta["label"], description=meta["description"])
+    if f.name in _PRESET_KEYS:
+        common["update"] = _mark_custom
+    if meta["items"]:
+        items = [(value.upper(), label, description) for value, label, description in meta["items"]]
+        return bpy.props.EnumProperty(items=items, default=meta["blender_default"].upper(), **common)
+    bounds = {key: meta[name] for key, name in (("min", "minimum"), ("max", "maximum"), ("soft_max", "soft_max"))
+              if meta[name] is not None}
+    kind = bpy.props.FloatProperty if isinstance(f.default, float) else bpy.props.IntProperty
+    return kind(default=meta["blender_default"], **bounds, **common)
+
+
+def knob_value(settings, name: str):
+    """A knob's value as gpu_core reads it (choices in lower case)."""
+    value = getattr(settings, name)
+    return value.lower() if isinstance(value, str) else value
+
+
 class GpuGiSceneSettings(bpy.types.PropertyGroup):
-    """The engine's settings; each one changes what the renderer does."""
+    """The engine's settings; each one changes what the renderer does. The
+    knobs are added from gpu_core's declarations at registration."""
 
     device: bpy.props.StringProperty(
         name="OpenCL Device",
         description="Platform name part or index, optionally ':device' (e.g. 'NVIDIA', '1:0', 'gpu'); "
-        "empty uses GPUGI_DEVICE or the CPU device",
+        "empty uses the device chosen in the add-on's preferences, else GPUGI_DEVICE or the CPU device",
         default="",
-    )
-    mode: bpy.props.EnumProperty(
-        name="Mode",
-        description="How indirect light is computed",
-        items=(
-            ("REFERENCE", "Reference", "Path tracer: the ground truth, noisy until many samples; indirect light "
-             "needs Diffuse Bounces above 0"),
-            ("GI", "GI", "Photon maps, irradiance cache and final gathering: direct light and mirrors/glass "
-             "traced, indirect light and caustics from photons; smooth at few samples"),
-        ),
-        default="GI",
     )
     preset: bpy.props.EnumProperty(
         name="Preset",
@@ -79,83 +96,17 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
         default="CUSTOM",
         update=_apply_preset,
     )
-    samples: bpy.props.IntProperty(
-        name="Samples", description="Camera paths per pixel (final render)", default=16, min=1, soft_max=1024,
-        update=_mark_custom,
-    )
-    preview_samples: bpy.props.IntProperty(
-        name="Viewport Samples", description="Camera paths per pixel in the viewport", default=4, min=1, soft_max=256
-    )
-    max_bounces: bpy.props.IntProperty(
-        name="Specular Bounces", description="Mirror and glass bounces followed from the camera", default=8, min=0,
-        max=64, update=_mark_custom,
-    )
-    diffuse_bounces: bpy.props.IntProperty(
-        name="Diffuse Bounces",
-        description="Diffuse bounces path-traced after the first diffuse hit (0 = direct light only)",
-        default=RenderSettings.diffuse_bounces,
-        min=0,
-        max=64,
-        update=_mark_custom,
-    )
-    clamp: bpy.props.FloatProperty(
-        name="Clamp", description="Largest radiance of one sample (0 disables clamping)", default=0.0, min=0.0
-    )
-    seed: bpy.props.IntProperty(name="Seed", description="Noise pattern", default=0, min=0)
-
-    # global-illumination knobs (issue 5): stored now, consumed by the GI mode later
-    global_photons: bpy.props.IntProperty(
-        name="Global Photons", description="Photons emitted for the global photon map" + _GI_ONLY,
-        default=RenderSettings.global_photons, min=0, soft_max=5_000_000, update=_mark_custom,
-    )
-    caustic_photons: bpy.props.IntProperty(
-        name="Caustic Photons", description="Photons emitted for the caustic photon map (traced only when "
-        "the scene has mirrors or glass)" + _GI_ONLY,
-        default=RenderSettings.caustic_photons, min=0, soft_max=5_000_000, update=_mark_custom,
-    )
-    photon_k: bpy.props.IntProperty(
-        name="Photons per Estimate", description="Nearest photons in one density estimate (k)" + _GI_ONLY,
-        default=RenderSettings.photon_k, min=1, soft_max=500, update=_mark_custom,
-    )
-    cache_seeds: bpy.props.IntProperty(
-        name="Cache Points", description="Irradiance-cache sample points (k-means seeds)" + _GI_ONLY,
-        default=RenderSettings.cache_seeds, min=1, soft_max=20_000, update=_mark_custom,
-    )
-    gather_rays: bpy.props.IntProperty(
-        name="Gather Rays", description="Final-gather rays per cache point" + _GI_ONLY,
-        default=RenderSettings.gather_rays, min=1, soft_max=2048, update=_mark_custom,
-    )
-    cut_delta: bpy.props.FloatProperty(
-        name="Cut Threshold",
-        description="Illumination cut: a node is replaced by its children where its approximate irradiance "
-        "differs from the exact one by more than this fraction of it (delta)" + _GI_ONLY,
-        default=RenderSettings.cut_delta, min=0.0, soft_max=4.0, update=_mark_custom,
-    )
-    cache_alpha: bpy.props.FloatProperty(
-        name="Cache Distance Weight",
-        description="Weight of distance against normal change when grouping cache points (alpha, times the "
-        "scene's largest side)" + _GI_ONLY,
-        default=RenderSettings.cache_alpha, min=0.0, soft_max=10.0, update=_mark_custom,
-    )
 
     def render_settings(self, preview: bool = False, transparent: bool = False) -> RenderSettings:
         """gpu_core settings for a final render, or for the viewport/previews."""
-        return RenderSettings(
-            mode=self.mode.lower(),
-            samples=self.preview_samples if preview else self.samples,
-            max_bounces=self.max_bounces,
-            diffuse_bounces=self.diffuse_bounces,
-            clamp=self.clamp,
-            seed=self.seed,
-            transparent_background=transparent,
-            global_photons=self.global_photons,
-            caustic_photons=self.caustic_photons,
-            photon_k=self.photon_k,
-            cache_seeds=self.cache_seeds,
-            gather_rays=self.gather_rays,
-            cut_delta=self.cut_delta,
-            cache_alpha=self.cache_alpha,
-        )
+        values = {f.name: knob_value(self, f.name) for f in knobs()}
+        if preview:
+            values["samples"] = values["preview_samples"]
+        return RenderSettings(**values, transparent_background=transparent)
+
+
+for _knob in knobs():
+    GpuGiSceneSettings.__annotations__[_knob.name] = knob_property(_knob)
 
 
 class GpuGiViewLayerSettings(bpy.types.PropertyGroup):

@@ -11,3 +11,8 @@ def mode_line(stats: dict) -> str:
 def format_stage_times(ms: dict) -> str:
     """'export 3 ms, kdtree 25 ms, ...' in the order the stages ran."""
     return ", ".join(f"{name} {value:.0f} ms" for name, value in ms.items())
+
+
+def format_transfers(transfers: dict) -> str:
+    """'to device 12.3 MB, to host 1.0 MB'."""
+    return f"to device {transfers['to_device'] / 1e6:.1f} MB, to host {transfers['to_host'] / 1e6:.1f} MB"

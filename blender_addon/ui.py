@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import bpy
 
+from gpu_core.settings import knobs
+
 ENGINE_ID = "GPUGI"
 
 # Stock panels marked for the built-in render engine that describe something
@@ -36,6 +38,14 @@ class GpuGiRenderPanel:
         return context.engine == ENGINE_ID
 
 
+def draw_knobs(layout, settings, panel: str) -> None:
+    """The knobs gpu_core's settings place in ``panel``, under their short labels."""
+    col = layout.column(align=True)
+    for knob in knobs():
+        if knob.metadata["panel"] == panel:
+            col.prop(settings, knob.name, text=knob.metadata["text"])
+
+
 class GPUGI_PT_mode(GpuGiRenderPanel, bpy.types.Panel):
     bl_label = "Mode"
 
@@ -43,7 +53,7 @@ class GPUGI_PT_mode(GpuGiRenderPanel, bpy.types.Panel):
         settings = context.scene.gpugi
         layout = self.layout
         layout.use_property_split = True
-        layout.prop(settings, "mode")
+        draw_knobs(layout, settings, "mode")
         layout.prop(settings, "preset")
 
 
@@ -51,25 +61,16 @@ class GPUGI_PT_sampling(GpuGiRenderPanel, bpy.types.Panel):
     bl_label = "Sampling"
 
     def draw(self, context):
-        settings = context.scene.gpugi
-        layout = self.layout
-        layout.use_property_split = True
-        col = layout.column(align=True)
-        col.prop(settings, "samples", text="Render")
-        col.prop(settings, "preview_samples", text="Viewport")
-        layout.prop(settings, "seed")
-        layout.prop(settings, "clamp")
+        self.layout.use_property_split = True
+        draw_knobs(self.layout, context.scene.gpugi, "sampling")
 
 
 class GPUGI_PT_light_paths(GpuGiRenderPanel, bpy.types.Panel):
     bl_label = "Light Paths"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        col = layout.column(align=True)
-        col.prop(context.scene.gpugi, "max_bounces", text="Specular")
-        col.prop(context.scene.gpugi, "diffuse_bounces", text="Diffuse")
+        self.layout.use_property_split = True
+        draw_knobs(self.layout, context.scene.gpugi, "light_paths")
 
 
 class GPUGI_PT_global_illumination(GpuGiRenderPanel, bpy.types.Panel):
@@ -81,16 +82,7 @@ class GPUGI_PT_global_illumination(GpuGiRenderPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.active = settings.mode == "GI"
-        col = layout.column(align=True)
-        col.prop(settings, "global_photons", text="Photons Global")
-        col.prop(settings, "caustic_photons", text="Caustic")
-        col.prop(settings, "photon_k")
-        col = layout.column(align=True)
-        col.prop(settings, "cache_seeds")
-        col.prop(settings, "gather_rays")
-        col = layout.column(align=True)
-        col.prop(settings, "cut_delta")
-        col.prop(settings, "cache_alpha")
+        draw_knobs(layout, settings, "gi")
 
 
 class GPUGI_PT_film(GpuGiRenderPanel, bpy.types.Panel):

@@ -1,65 +1,114 @@
-"""Render settings: every knob that trades speed for accuracy lives here,
-with the preset ladder (Draft, Preview, Final, Reference) that sets them."""
+"""Render settings: every knob that trades speed for accuracy, declared once.
+
+Each field of ``RenderSettings`` carries its label, description, range and
+panel in its metadata; the add-on makes its Blender properties, panels and
+command-line options from them (blender_addon/properties.py, ui.py,
+cli.py), so a knob is written here and nowhere else. ``PRESETS`` is the
+ladder (Draft, Preview, Final, Reference) that sets them.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, fields, replace
 
 # Render modes: "reference" is the path tracer (the in-house ground truth);
 # "gi" traces direct light and specular paths and takes indirect diffuse
 # light from photon maps, the irradiance cache and final gathering.
 MODES = ("reference", "gi")
+_MODE_ITEMS = (
+    ("reference", "Reference", "Path tracer: the ground truth, noisy until many samples; indirect light needs "
+     "Diffuse Bounces above 0"),
+    ("gi", "GI", "Photon maps, irradiance cache and final gathering: direct light and mirrors/glass traced, "
+     "indirect light and caustics from photons; smooth at few samples"),
+)
+_GI_ONLY = " (GI mode only)"
+
+
+def knob(default, label: str, description: str, *, panel: str = "", text: str = "", minimum=None, maximum=None,
+         soft_max=None, items=None, blender_default=None):
+    """A setting the user sees: shown in ``panel`` (with ``text`` as its
+    short label there), bounded by ``minimum`` / ``maximum`` (and offered up
+    to ``soft_max``), one of ``items`` for a choice. ``blender_default``: the
+    add-on's default where it differs from the library's (mode: Blender
+    users get GI, library callers the ground truth)."""
+    meta = dict(label=label, description=description, panel=panel, text=text or label, minimum=minimum,
+                maximum=maximum, soft_max=soft_max, items=items,
+                blender_default=default if blender_default is None else blender_default)
+    return field(default=default, metadata=meta)
+
+
+def internal(default):
+    """A setting the caller fills (from the scene or the render), not a knob."""
+    return field(default=default)
 
 
 @dataclass
 class RenderSettings:
     """What the renderer does; the add-on fills it from scene.gpugi."""
 
-    mode: str = "reference"  # one of MODES
-    samples: int = 16  # camera paths per pixel (anti-aliasing and light sampling)
-    max_bounces: int = 8  # mirror/glass bounces followed from the camera
-    light_samples: int = 1  # shadow rays per light at each diffuse point
-    diffuse_bounces: int = 0  # path-traced diffuse bounces (0 = direct light only)
-    seed: int = 0  # random sequence; change for a different noise pattern
-    clamp: float = 0.0  # clamp of one sample's radiance; 0 = off
-    transparent_background: bool = False  # film alpha 0 where the world is seen
-    batch_pixels: int = 16384  # most pixels per kernel launch (bounds cancel latency)
-    light_passes: bool = False  # also return the light passes (renderer.LIGHT_PASSES)
-    denoising_passes: bool = False  # also return Denoising Albedo, Normal and Depth
+    mode: str = knob("reference", "Mode", "How indirect light is computed", panel="mode", items=_MODE_ITEMS,
+                     blender_default="gi")
+    samples: int = knob(16, "Samples", "Camera paths per pixel (final render): anti-aliasing and light sampling",
+                        panel="sampling", text="Render", minimum=1, soft_max=1024)
+    preview_samples: int = knob(4, "Viewport Samples", "Camera paths per pixel in the viewport", panel="sampling",
+                                text="Viewport", minimum=1, soft_max=256)
+    seed: int = knob(0, "Seed", "Noise pattern", panel="sampling", minimum=0)
+    clamp: float = knob(0.0, "Clamp", "Largest radiance of one sample (0 disables clamping)", panel="sampling",
+                        minimum=0.0)
+    max_bounces: int = knob(8, "Specular Bounces", "Mirror and glass bounces followed along camera, gather and "
+                            "photon paths", panel="light_paths", text="Specular", minimum=0, maximum=64)
+    diffuse_bounces: int = knob(0, "Diffuse Bounces", "Diffuse bounces path-traced after the first diffuse hit "
+                                "(0 = direct light only; Reference mode)", panel="light_paths", text="Diffuse",
+                                minimum=0, maximum=64)
+    global_photons: int = knob(200_000, "Global Photons", "Photons emitted for the global photon map" + _GI_ONLY,
+                               panel="gi", text="Photons Global", minimum=0, soft_max=5_000_000)
+    caustic_photons: int = knob(100_000, "Caustic Photons", "Photons emitted for the caustic photon map (traced "
+                                "only when the scene has mirrors or glass)" + _GI_ONLY, panel="gi", text="Caustic",
+                                minimum=0, soft_max=5_000_000)
+    photon_k: int = knob(50, "Photons per Estimate", "Nearest photons in one density estimate (k)" + _GI_ONLY,
+                         panel="gi", minimum=1, maximum=1024, soft_max=500)
+    cache_seeds: int = knob(1600, "Cache Points", "Irradiance-cache sample points (k-means seeds)" + _GI_ONLY,
+                            panel="gi", minimum=1, soft_max=20_000)
+    gather_rays: int = knob(256, "Gather Rays", "Final-gather rays per cache point" + _GI_ONLY, panel="gi",
+                            minimum=1, soft_max=2048)
+    cut_delta: float = knob(1.0, "Cut Threshold", "Illumination cut: a node is replaced by its children where its "
+                            "approximate irradiance differs from the exact one by more than this fraction of it "
+                            "(delta)" + _GI_ONLY, panel="gi", minimum=0.0, soft_max=4.0)
+    cache_alpha: float = knob(0.6, "Cache Distance Weight", "Weight of distance against normal change when "
+                              "grouping cache points (alpha, times the largest side of the box of the shading "
+                              "points)" + _GI_ONLY, panel="gi", minimum=0.0, soft_max=10.0)
 
-    # Global-illumination knobs, read by the "gi" mode; the reference path
-    # tracer ignores them.
-    global_photons: int = 200_000  # photons emitted for the global map
-    caustic_photons: int = 100_000  # photons emitted for the caustic map (traced only with mirrors or glass)
-    photon_k: int = 50  # nearest photons in one density estimate
-    cache_seeds: int = 1600  # irradiance-cache sample points (k-means seeds)
-    gather_rays: int = 256  # final-gather rays per sample point
-    cut_delta: float = 1.0  # illumination cut: split a node where |E~ - E| > delta * E
-    cache_alpha: float = 0.6  # cache error weight of distance, times the scene's largest side
+    light_samples: int = internal(1)  # shadow rays per light at each diffuse point
+    transparent_background: bool = internal(False)  # film alpha 0 where the world is seen
+    batch_pixels: int = internal(16384)  # most pixels per kernel launch (bounds cancel latency)
+    light_passes: bool = internal(False)  # also return the light passes (image.LIGHT_PASSES)
+    denoising_passes: bool = internal(False)  # also return Denoising Albedo, Normal and Depth
 
     def validated(self) -> "RenderSettings":
         """A copy with every field in its valid range."""
-        return replace(
-            self,
-            mode=self.mode if self.mode in MODES else "reference",
-            samples=max(1, int(self.samples)),
-            max_bounces=max(0, int(self.max_bounces)),
-            light_samples=max(1, int(self.light_samples)),
-            diffuse_bounces=max(0, int(self.diffuse_bounces)),
-            seed=int(self.seed) & 0xFFFFFFFF,
-            clamp=max(0.0, float(self.clamp)),
-            transparent_background=bool(self.transparent_background),
-            batch_pixels=max(1, int(self.batch_pixels)),
-            light_passes=bool(self.light_passes),
-            denoising_passes=bool(self.denoising_passes),
-            global_photons=max(0, int(self.global_photons)),
-            caustic_photons=max(0, int(self.caustic_photons)),
-            photon_k=max(1, int(self.photon_k)),
-            cache_seeds=max(1, int(self.cache_seeds)),
-            gather_rays=max(1, int(self.gather_rays)),
-            cut_delta=max(0.0, float(self.cut_delta)),
-            cache_alpha=max(0.0, float(self.cache_alpha)),
-        )
+        values = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            meta = f.metadata
+            if f.name == "mode":
+                value = value if value in MODES else "reference"
+            elif isinstance(f.default, bool):
+                value = bool(value)
+            elif isinstance(f.default, (int, float)):
+                value = type(f.default)(value)
+                low, high = meta.get("minimum"), meta.get("maximum")
+                value = max(low, value) if low is not None else value
+                value = min(high, value) if high is not None else value
+            values[f.name] = value
+        values["seed"] = int(self.seed) & 0xFFFFFFFF
+        values["light_samples"] = max(1, int(self.light_samples))
+        values["batch_pixels"] = max(1, int(self.batch_pixels))
+        return replace(self, **values)
+
+
+def knobs() -> list:
+    """The dataclass fields the user sees (those with a label), in order."""
+    return [f for f in fields(RenderSettings) if f.metadata.get("label")]
 
 
 # The preset ladder: each step costs more time and gives less error. Samples

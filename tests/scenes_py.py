@@ -72,3 +72,14 @@ def make_scene(tris, material_ids, materials, lights, camera, world=(0, 0, 0)) -
         camera=camera,
         world_color=np.asarray(world, np.float32),
     )
+
+
+def on_device(device, scene):
+    """The validated ``scene`` and its device copy (SceneBuffers), as the
+    renderer uploads it: what stage kernels read."""
+    from gpu_core.scene import validate
+    from gpu_core.scene.tables import scene_tables
+    from gpu_core.scene.upload import upload
+
+    scene = validate(scene)
+    return scene, upload(device, scene, scene_tables(scene))

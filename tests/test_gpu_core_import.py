@@ -5,7 +5,8 @@ import sys
 
 from conftest import ROOT
 
-MODULES = ["gpu_core", "gpu_core.device", "gpu_core.scene", "gpu_core.kdtree", "gpu_core.renderer", "gpu_core.layout", "gpu_core.settings"]
+MODULES = ["gpu_core", "gpu_core.device", "gpu_core.scene", "gpu_core.accel.kdtree", "gpu_core.renderer",
+           "gpu_core.device.layout", "gpu_core.settings", "gpu_core.plan", "gpu_core.gi.pipeline"]
 
 
 def test_gpu_core_imports_and_renders_with_bpy_absent():

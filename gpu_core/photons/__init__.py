@@ -1,6 +1,6 @@
-"""Photon maps: photon tracing, the point kd-tree with kNN and density estimation."""
+"""Photon maps: emission in Cycles' units and tracing into the global and
+caustic maps (each a point kd-tree, gpu_core/accel/point_tree.py)."""
 
-from .point_tree import FILTERS, PointTree
 from .trace import PhotonMaps, trace_photon_maps
 
-__all__ = ["FILTERS", "PhotonMaps", "PointTree", "trace_photon_maps"]
+__all__ = ["PhotonMaps", "trace_photon_maps"]

@@ -1,0 +1,639 @@
+/* Breadth-first kd-tree construction over triangles [ZHWG08]. Each kernel
+ * handles one list of nodes (or their elements) in parallel; the host
+ * launches them level by level and reads back only counts.
+ *
+ * Element: a (triangle, node) pair with the triangle's bounds clipped to the
+ *   node, as el_tri / el_lo / el_hi; a node's elements are contiguous.
+ * Record: a node in creation order. rec_lo / rec_hi is its cell, rec_info is
+ *   (axis or KD_LEAF, left record or leaf offset, right record or leaf
+ *   size, depth), rec_split its plane. The output stage turns records into
+ *   the preorder KdNode array (device/structs.h).
+ * Large node: (element start, element count, record, depth) in an int4,
+ *   with its cell beside it. Small node: (small root, record) and a 64-bit
+ *   mask of the small root's elements it holds.
+ *
+ * Defines from the host: KD_CHUNK (elements per chunk, a power of two),
+ * KD_SMALL (largest small node, at most 64), KD_EMPTY_RATIO (empty-space
+ * cut threshold), KD_COST_TRAVERSE (SAH cost of a node step, in triangle
+ * tests), KD_SAH_GROUP (work-group size of the SAH search) and
+ * KD_SAH_LANES (its work-items per node, a power of two dividing
+ * KD_SAH_GROUP). */
+#include "device/structs.h"
+#include "accel/kdtree_clip.h"
+
+/* How a large node is divided (bits 2.. of its mode; bits 0..1: axis). The
+ * "low" rule puts elements lying in the plane above it, "high" below. */
+#define KD_SPLIT_MEDIAN 0 /* spatial median, high rule */
+#define KD_CUT_LOW 1      /* empty space below the plane cut off, low rule */
+#define KD_CUT_HIGH 2     /* empty space above the plane cut off, high rule */
+#define KD_SPLIT_NONE 3   /* no plane splits it: the node becomes a leaf */
+
+/* Where a child's elements go. */
+#define KD_DEST_NONE 0
+#define KD_DEST_LARGE 1
+#define KD_DEST_SMALL 2
+#define KD_DEST_LEAF 3
+
+inline float KdBuild_area(float4 lo, float4 hi) {
+    float4 d = hi - lo;
+    return 2.0f * (d.x * d.y + d.y * d.z + d.z * d.x);
+}
+
+/* Sides of the plane an element with bounds [lo, hi] on the split axis
+ * belongs to: bit 0 below, bit 1 above. Elements touching the plane from
+ * one side stay on that side; flat ones in it follow the rule. */
+inline int KdBuild_sides(float lo, float hi, float plane, bool low_rule) {
+    bool below, above;
+    if (low_rule) {
+        below = lo < plane;
+        above = hi > plane || lo >= plane;
+    } else {
+        below = lo < plane || hi <= plane;
+        above = hi > plane;
+    }
+    return (below ? 1 : 0) | (above ? 2 : 0);
+}
+
+/* ---- setup -------------------------------------------------------------- */
+
+/* One element per triangle, with the triangle's bounds. */
+__kernel void KdBuild_init(const __global float4 *verts, const int n,
+                           __global int *el_tri, __global float4 *el_lo,
+                           __global float4 *el_hi) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float4 a = verts[3 * i], b = verts[3 * i + 1], c = verts[3 * i + 2];
+    el_tri[i] = i;
+    el_lo[i] = fmin(fmin(a, b), c);
+    el_hi[i] = fmax(fmax(a, b), c);
+}
+
+/* ---- large-node stage --------------------------------------------------- */
+
+/* Chunk -> node map: node i owns chunks chunk_base[i] .. + ceil(count/KD_CHUNK). */
+__kernel void KdBuild_chunk_nodes(const __global int4 *act_info,
+                                  const __global int *chunk_base, const int n,
+                                  __global int *chunk_node) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
+    for (int k = 0; k < chunks; ++k) chunk_node[chunk_base[i] + k] = i;
+}
+
+/* Bounds of each chunk's elements by a work-group reduction (one group per
+ * chunk, power-of-two size up to KD_CHUNK); also tags elements with their
+ * node. */
+__kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
+                                   const __global int *chunk_base,
+                                   const __global int *chunk_node,
+                                   const __global float4 *el_lo,
+                                   const __global float4 *el_hi,
+                                   __global int *el_node,
+                                   __global float4 *chunk_lo,
+                                   __global float4 *chunk_hi) {
+    __local float4 lo_s[KD_CHUNK], hi_s[KD_CHUNK];
+    int c = get_group_id(0), lid = get_local_id(0), size = get_local_size(0);
+    int node = chunk_node[c];
+    int4 info = act_info[node];
+    int begin = info.x + (c - chunk_base[node]) * KD_CHUNK;
+    int end = min(begin + KD_CHUNK, info.x + info.y);
+    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+    for (int e = begin + lid; e < end; e += size) {
+        lo = fmin(lo, el_lo[e]);
+        hi = fmax(hi, el_hi[e]);
+        el_node[e] = node;
+    }
+    lo_s[lid] = lo;
+    hi_s[lid] = hi;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int s = size / 2; s > 0; s >>= 1) {
+        if (lid < s) {
+            lo_s[lid] = fmin(lo_s[lid], lo_s[lid + s]);
+            hi_s[lid] = fmax(hi_s[lid], hi_s[lid + s]);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0) {
+        chunk_lo[c] = lo_s[0];
+        chunk_hi[c] = hi_s[0];
+    }
+}
+
+/* Per node: its bounds from its chunks (segmented reduction, the chunks of
+ * a node being contiguous), clipped to its cell; then the plane. A side
+ * with more than KD_EMPTY_RATIO of the cell empty is cut off first;
+ * otherwise the longest axis of the bounds is split at its middle. */
+__kernel void KdBuild_large_split(const __global float4 *act_lo,
+                                  const __global float4 *act_hi,
+                                  const __global int4 *act_info,
+                                  const __global int *chunk_base,
+                                  const __global float4 *chunk_lo,
+                                  const __global float4 *chunk_hi, const int n,
+                                  __global float *node_split,
+                                  __global int *node_mode) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int first = chunk_base[i];
+    int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
+    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+    for (int k = 0; k < chunks; ++k) {
+        lo = fmin(lo, chunk_lo[first + k]);
+        hi = fmax(hi, chunk_hi[first + k]);
+    }
+    float4 cell_lo = act_lo[i], cell_hi = act_hi[i];
+    lo = fmax(lo, cell_lo);
+    hi = fmin(hi, cell_hi);
+
+    /* empty-space cut: the emptiest side beyond the threshold */
+    float best = KD_EMPTY_RATIO;
+    int kind = KD_SPLIT_NONE, axis = 0;
+    float plane = 0.0f;
+    for (int a = 0; a < 3; ++a) {
+        float extent = Axis_of(cell_hi, a) - Axis_of(cell_lo, a);
+        if (!(extent > 0.0f)) continue;
+        float below = (Axis_of(lo, a) - Axis_of(cell_lo, a)) / extent;
+        float above = (Axis_of(cell_hi, a) - Axis_of(hi, a)) / extent;
+        if (below > best) {
+            best = below;
+            kind = KD_CUT_LOW;
+            axis = a;
+            plane = Axis_of(lo, a);
+        }
+        if (above > best) {
+            best = above;
+            kind = KD_CUT_HIGH;
+            axis = a;
+            plane = Axis_of(hi, a);
+        }
+    }
+    /* spatial median of the longest axis whose middle lies strictly inside */
+    if (kind == KD_SPLIT_NONE) {
+        float longest = 0.0f;
+        for (int a = 0; a < 3; ++a) {
+            float l = Axis_of(lo, a), h = Axis_of(hi, a);
+            float mid = 0.5f * l + 0.5f * h;
+            if (h - l > longest && l < mid && mid < h) {
+                longest = h - l;
+                kind = KD_SPLIT_MEDIAN;
+                axis = a;
+                plane = mid;
+            }
+        }
+    }
+    node_split[i] = plane;
+    node_mode[i] = axis | (kind << 2);
+}
+
+/* Per element: the sides of its node's plane it goes to (packed as
+ * below | above << 32 for the scan) and its bounds on each side. A
+ * straddling triangle is clipped to each side's box widened by eps, and
+ * dropped from a side it does not reach. Elements of an unsplit node all
+ * go "below", to the node's own leaf. */
+__kernel void KdBuild_large_classify(const __global float4 *verts,
+                                     const __global int *el_tri,
+                                     const __global float4 *el_lo,
+                                     const __global float4 *el_hi,
+                                     const __global int *el_node,
+                                     const __global float *node_split,
+                                     const __global int *node_mode,
+                                     const int n, const float eps,
+                                     __global long *flags,
+                                     __global float4 *below_lo,
+                                     __global float4 *below_hi,
+                                     __global float4 *above_lo,
+                                     __global float4 *above_hi) {
+    int e = get_global_id(0);
+    if (e >= n) return;
+    int node = el_node[e];
+    int mode = node_mode[node];
+    int axis = mode & 3, kind = mode >> 2;
+    float4 lo = el_lo[e], hi = el_hi[e];
+    below_lo[e] = above_lo[e] = lo;
+    below_hi[e] = above_hi[e] = hi;
+    if (kind == KD_SPLIT_NONE) {
+        flags[e] = 1;
+        return;
+    }
+    float plane = node_split[node];
+    int sides = KdBuild_sides(Axis_of(lo, axis), Axis_of(hi, axis), plane,
+                              kind == KD_CUT_LOW);
+    if (sides == 3) {
+        int t = el_tri[e];
+        float4 v0 = verts[3 * t], v1 = verts[3 * t + 1], v2 = verts[3 * t + 2];
+        float4 widen = (float4)(eps, eps, eps, 0.0f);
+        float4 box_hi = Axis_with(hi, axis, plane + eps);
+        float4 box_lo = Axis_with(lo, axis, plane - eps);
+        float4 clo, chi;
+        int kept = 0;
+        if (KdClip_triangle(v0, v1, v2, lo, box_hi, &clo, &chi)) {
+            below_lo[e] = fmax(clo - widen, lo);
+            below_hi[e] = fmin(chi + widen, box_hi);
+            kept |= 1;
+        }
+        if (KdClip_triangle(v0, v1, v2, box_lo, hi, &clo, &chi)) {
+            above_lo[e] = fmax(clo - widen, box_lo);
+            above_hi[e] = fmin(chi + widen, hi);
+            kept |= 2;
+        }
+        if (kept == 0) { /* only if rounding lost it: keep it on both sides */
+            below_hi[e] = box_hi;
+            above_lo[e] = box_lo;
+            kept = 3;
+        }
+        sides = kept;
+    }
+    flags[e] = (long)(sides & 1) | ((long)(sides >> 1) << 32);
+}
+
+/* Per node: the element counts of its two children (from the scan of the
+ * element flags), each child's class, and the node's contribution to the
+ * level's counters: (large elements, small elements, leaf elements, large
+ * nodes, small roots, new records, 0, 0). A child is an empty leaf when it
+ * has no element, a small root with at most KD_SMALL, a leaf at the depth
+ * limit (or when force_leaf is set), else a large node. */
+__kernel void KdBuild_large_children(const __global int4 *act_info,
+                                     const __global int *node_mode,
+                                     const __global long *flag_scan,
+                                     const __global long *flag_total,
+                                     const int n_el, const int n,
+                                     const int max_depth, const int force_leaf,
+                                     __global int2 *node_counts,
+                                     __global int8 *counters) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int4 info = act_info[i];
+    int end = info.x + info.y;
+    long sum = (end < n_el ? flag_scan[end] : flag_total[0]) - flag_scan[info.x];
+    int2 counts = (int2)((int)(sum & 0xffffffffL), (int)(sum >> 32));
+    node_counts[i] = counts;
+    int8 c = (int8)(0);
+    if ((node_mode[i] >> 2) == KD_SPLIT_NONE) {
+        c.s2 = counts.x;
+    } else {
+        c.s5 = 2;
+        for (int side = 0; side < 2; ++side) {
+            int count = side == 0 ? counts.x : counts.y;
+            if (count == 0) continue;
+            if (count <= KD_SMALL) {
+                c.s1 += count;
+                c.s4 += 1;
+            } else if (info.w + 1 >= max_depth || force_leaf) {
+                c.s2 += count;
+            } else {
+                c.s0 += count;
+                c.s3 += 1;
+            }
+        }
+    }
+    counters[i] = c;
+}
+
+/* Per node: writes its record, its children's records, cells and depth,
+ * the next level's large nodes and the new small roots, and where each
+ * child's elements go (dest: kind below, base below, kind above, base
+ * above). Bases are the exclusive scan of the counters plus the level's
+ * offsets into the growing arrays. */
+__kernel void KdBuild_large_emit(
+    const __global float4 *act_lo, const __global float4 *act_hi,
+    const __global int4 *act_info, const __global float *node_split,
+    const __global int *node_mode, const __global int2 *node_counts,
+    const __global int8 *counter_scan, const int n, const int max_depth,
+    const int force_leaf, const int rec_base, const int root_base,
+    const int small_el_base, const int leaf_base, __global float4 *rec_lo,
+    __global float4 *rec_hi, __global int4 *rec_info, __global float *rec_split,
+    __global float4 *next_lo, __global float4 *next_hi,
+    __global int4 *next_info, __global int4 *small_roots,
+    __global int4 *node_dest) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int4 info = act_info[i];
+    int8 base = counter_scan[i];
+    int mode = node_mode[i];
+    int axis = mode & 3;
+    int depth = info.w;
+    if ((mode >> 2) == KD_SPLIT_NONE) {
+        rec_info[info.z] = (int4)(KD_LEAF, leaf_base + base.s2, info.y, depth);
+        node_dest[i] = (int4)(KD_DEST_LEAF, leaf_base + base.s2, KD_DEST_NONE, 0);
+        return;
+    }
+    float plane = node_split[i];
+    int2 counts = node_counts[i];
+    int left = rec_base + base.s5;
+    rec_info[info.z] = (int4)(axis, left, left + 1, depth);
+    rec_split[info.z] = plane;
+    int dest[4];
+    for (int side = 0; side < 2; ++side) {
+        int child = left + side;
+        int count = side == 0 ? counts.x : counts.y;
+        float4 lo = act_lo[i], hi = act_hi[i];
+        if (side == 0) hi = Axis_with(hi, axis, plane);
+        else lo = Axis_with(lo, axis, plane);
+        rec_lo[child] = lo;
+        rec_hi[child] = hi;
+        rec_info[child] = (int4)(KD_LEAF, 0, 0, depth + 1);
+        int kind = KD_DEST_NONE, at = 0;
+        if (count == 0) {
+            /* an empty leaf */
+        } else if (count <= KD_SMALL) {
+            kind = KD_DEST_SMALL;
+            at = small_el_base + base.s1;
+            small_roots[root_base + base.s4] = (int4)(at, count, child, 0);
+            base.s1 += count;
+            base.s4 += 1;
+        } else if (depth + 1 >= max_depth || force_leaf) {
+            kind = KD_DEST_LEAF;
+            at = leaf_base + base.s2;
+            rec_info[child] = (int4)(KD_LEAF, at, count, depth + 1);
+            base.s2 += count;
+        } else {
+            kind = KD_DEST_LARGE;
+            at = base.s0;
+            next_lo[base.s3] = lo;
+            next_hi[base.s3] = hi;
+            next_info[base.s3] = (int4)(at, count, child, depth + 1);
+            base.s0 += count;
+            base.s3 += 1;
+        }
+        dest[2 * side] = kind;
+        dest[2 * side + 1] = at;
+    }
+    node_dest[i] = (int4)(dest[0], dest[1], dest[2], dest[3]);
+}
+
+/* Per element: copies it to each side it goes to, at its rank among its
+ * node's elements on that side: into the next level's elements, the small
+ * roots' elements, or a leaf's triangle list. */
+__kernel void KdBuild_large_scatter(
+    const __global int *el_tri, const __global int *el_node,
+    const __global int4 *act_info, const __global long *flags,
+    const __global long *flag_scan, const __global float4 *below_lo,
+    const __global float4 *below_hi, const __global float4 *above_lo,
+    const __global float4 *above_hi, const __global int4 *node_dest,
+    const int n, __global int *next_tri, __global float4 *next_lo,
+    __global float4 *next_hi, __global int *small_tri,
+    __global float4 *small_lo, __global float4 *small_hi,
+    __global int *leaf_tris) {
+    int e = get_global_id(0);
+    if (e >= n) return;
+    int node = el_node[e];
+    long rank = flag_scan[e] - flag_scan[act_info[node].x];
+    long flag = flags[e];
+    int4 dest = node_dest[node];
+    int tri = el_tri[e];
+    for (int side = 0; side < 2; ++side) {
+        if (((flag >> (32 * side)) & 1) == 0) continue;
+        int kind = side == 0 ? dest.x : dest.z;
+        int at = (side == 0 ? dest.y : dest.w) + (int)((rank >> (32 * side)) & 0xffffffffL);
+        float4 lo = side == 0 ? below_lo[e] : above_lo[e];
+        float4 hi = side == 0 ? below_hi[e] : above_hi[e];
+        if (kind == KD_DEST_LARGE) {
+            next_tri[at] = tri;
+            next_lo[at] = lo;
+            next_hi[at] = hi;
+        } else if (kind == KD_DEST_SMALL) {
+            small_tri[at] = tri;
+            small_lo[at] = lo;
+            small_hi[at] = hi;
+        } else if (kind == KD_DEST_LEAF) {
+            leaf_tris[at] = tri;
+        }
+    }
+}
+
+/* ---- small-node stage --------------------------------------------------- */
+
+/* Per small root: tags its elements with it and makes it the first small
+ * node, holding all its elements. */
+__kernel void KdBuild_small_init(const __global int4 *small_roots, const int n,
+                                 __global int *sel_root, __global int2 *sn_node,
+                                 __global ulong *sn_mask) {
+    int r = get_global_id(0);
+    if (r >= n) return;
+    int4 root = small_roots[r];
+    for (int k = 0; k < root.y; ++k) sel_root[root.x + k] = r;
+    sn_node[r] = (int2)(r, root.z);
+    sn_mask[r] = root.y == 64 ? ~0UL : ((1UL << root.y) - 1UL);
+}
+
+/* Per candidate plane (6 per small-root element: its bounds' low and high
+ * face on each axis): masks of the root's elements below and above it.
+ * Candidate 6 e + 2 axis + side comes from element e's low (side 0, low
+ * rule) or high (side 1, high rule) face, so its own element lands on the
+ * side it bounds. */
+__kernel void KdBuild_small_masks(const __global int4 *small_roots,
+                                  const __global int *sel_root,
+                                  const __global float4 *sel_lo,
+                                  const __global float4 *sel_hi, const int n,
+                                  __global ulong2 *cand) {
+    int c = get_global_id(0);
+    if (c >= n) return;
+    int e = c / 6, axis = (c % 6) >> 1, side = c & 1;
+    int4 root = small_roots[sel_root[e]];
+    float plane = Axis_of(side ? sel_hi[e] : sel_lo[e], axis);
+    ulong below = 0, above = 0;
+    for (int k = 0; k < root.y; ++k) {
+        int s = KdBuild_sides(Axis_of(sel_lo[root.x + k], axis),
+                              Axis_of(sel_hi[root.x + k], axis), plane, side == 0);
+        if (s & 1) below |= 1UL << k;
+        if (s & 2) above |= 1UL << k;
+    }
+    cand[c] = (ulong2)(below, above);
+}
+
+/* SAH cost of candidate c (of the small root's element k) for a node with
+ * element mask `mask` and cell [lo, hi]; kept in *best_cost / *best_cand
+ * when lower. Planes outside the open cell are skipped. */
+inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
+                             float4 hi, float area,
+                             const __global float4 *sel_lo,
+                             const __global float4 *sel_hi,
+                             const __global ulong2 *cand, float *best_cost,
+                             int *best_cand) {
+    int axis = (c % 6) >> 1;
+    float plane = Axis_of((c & 1) ? sel_hi[root.x + k] : sel_lo[root.x + k], axis);
+    if (!(Axis_of(lo, axis) < plane && plane < Axis_of(hi, axis))) return;
+    ulong2 m = cand[6 * root.x + c];
+    float below = (float)popcount(m.x & mask);
+    float above = (float)popcount(m.y & mask);
+    float cost = KD_COST_TRAVERSE +
+                 (below * KdBuild_area(lo, Axis_with(hi, axis, plane)) +
+                  above * KdBuild_area(Axis_with(lo, axis, plane), hi)) / area;
+    if (cost < *best_cost) {
+        *best_cost = cost;
+        *best_cand = c;
+    }
+}
+
+/* Per small node (KD_SAH_LANES work-items each, sharing its candidates):
+ * the candidate inside the node's cell with the lowest SAH
+ *   C_t + (N_below A_below + N_above A_above) / A,
+ * counts by popcount of the candidate's masks and the node's mask. best is
+ * the candidate, or -1 where a leaf (cost: its triangle count) is cheaper
+ * or the depth limit is reached; a node of at most C_t triangles is a leaf
+ * at once, as no split costs less than C_t. Ties go to the lowest
+ * candidate, so the choice does not depend on the lane count. The global
+ * size is a multiple of the work-group size, itself a multiple of
+ * KD_SAH_LANES. */
+__kernel void KdBuild_small_best(const __global int2 *sn_node,
+                                 const __global ulong *sn_mask,
+                                 const __global int4 *small_roots,
+                                 const __global float4 *rec_lo,
+                                 const __global float4 *rec_hi,
+                                 const __global int4 *rec_info,
+                                 const __global float4 *sel_lo,
+                                 const __global float4 *sel_hi,
+                                 const __global ulong2 *cand, const int n,
+                                 const int max_depth, __global int *best) {
+    __local float cost_s[KD_SAH_GROUP];
+    __local int cand_s[KD_SAH_GROUP];
+    int i = get_global_id(0) / KD_SAH_LANES, lane = get_global_id(0) % KD_SAH_LANES;
+    int lid = get_local_id(0);
+    float my_cost = INFINITY;
+    int my_cand = -1;
+    float leaf_cost = 0.0f;
+    if (i < n) {
+        int2 node = sn_node[i];
+        ulong mask = sn_mask[i];
+        int4 root = small_roots[node.x];
+        float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
+        float area = KdBuild_area(lo, hi);
+        leaf_cost = (float)popcount(mask);
+        if (rec_info[node.y].w < max_depth && area > 0.0f && leaf_cost > KD_COST_TRAVERSE) {
+#if KD_SAH_LANES == 1
+            /* the candidates of the node's elements only, lowest bit first */
+            for (ulong left = mask; left != 0UL; left &= left - 1UL) {
+                int k = popcount((left & (~left + 1UL)) - 1UL);
+                for (int c = 6 * k; c < 6 * k + 6; ++c)
+                    KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand,
+                                     &my_cost, &my_cand);
+            }
+#else
+            for (int c = lane; c < 6 * root.y; c += KD_SAH_LANES) {
+                int k = c / 6;
+                if (((mask >> k) & 1UL) != 0UL)
+                    KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand,
+                                     &my_cost, &my_cand);
+            }
+#endif
+        }
+    }
+#if KD_SAH_LANES > 1
+    /* the node's lanes agree on the cheapest, lowest candidate */
+    cost_s[lid] = my_cost;
+    cand_s[lid] = my_cand;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int s = KD_SAH_LANES / 2; s > 0; s >>= 1) {
+        if (lane < s) {
+            float other = cost_s[lid + s];
+            int other_cand = cand_s[lid + s];
+            if (other < cost_s[lid] || (other == cost_s[lid] && other_cand >= 0 &&
+                                        (cand_s[lid] < 0 || other_cand < cand_s[lid]))) {
+                cost_s[lid] = other;
+                cand_s[lid] = other_cand;
+            }
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    my_cost = cost_s[lid];
+    my_cand = cand_s[lid];
+#endif
+    if (i < n && lane == 0) best[i] = my_cost < leaf_cost ? my_cand : -1;
+}
+
+/* Per small node: a split writes its record and two child small nodes
+ * (masks: its mask and the candidate's); a leaf writes its record and its
+ * triangles. rank packs (splits before it) | (leaf triangles before it)
+ * << 32. */
+__kernel void KdBuild_small_emit(
+    const __global int2 *sn_node, const __global ulong *sn_mask,
+    const __global int *best, const __global long *rank,
+    const __global int4 *small_roots, const __global int *sel_tri,
+    const __global float4 *sel_lo, const __global float4 *sel_hi,
+    const __global ulong2 *cand, const int n, const int rec_base,
+    const int leaf_base, __global float4 *rec_lo, __global float4 *rec_hi,
+    __global int4 *rec_info, __global float *rec_split,
+    __global int2 *next_node, __global ulong *next_mask,
+    __global int *leaf_tris) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int2 node = sn_node[i];
+    ulong mask = sn_mask[i];
+    int4 root = small_roots[node.x];
+    int depth = rec_info[node.y].w;
+    long r = rank[i];
+    int c = best[i];
+    if (c < 0) {
+        int at = leaf_base + (int)(r >> 32);
+        rec_info[node.y] = (int4)(KD_LEAF, at, popcount(mask), depth);
+        for (ulong left = mask; left != 0UL; left &= left - 1UL)
+            leaf_tris[at++] = sel_tri[root.x + popcount((left & (~left + 1UL)) - 1UL)];
+        return;
+    }
+    int split = (int)(r & 0xffffffffL);
+    int k = c / 6, axis = (c % 6) >> 1;
+    float plane = Axis_of((c & 1) ? sel_hi[root.x + k] : sel_lo[root.x + k], axis);
+    ulong2 m = cand[6 * root.x + c];
+    int left = rec_base + 2 * split;
+    float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
+    rec_info[node.y] = (int4)(axis, left, left + 1, depth);
+    rec_split[node.y] = plane;
+    rec_lo[left] = lo;
+    rec_hi[left] = Axis_with(hi, axis, plane);
+    rec_lo[left + 1] = Axis_with(lo, axis, plane);
+    rec_hi[left + 1] = hi;
+    rec_info[left] = rec_info[left + 1] = (int4)(KD_LEAF, 0, 0, depth + 1);
+    next_node[2 * split] = (int2)(node.x, left);
+    next_node[2 * split + 1] = (int2)(node.x, left + 1);
+    next_mask[2 * split] = mask & m.x;
+    next_mask[2 * split + 1] = mask & m.y;
+}
+
+/* ---- output stage ------------------------------------------------------- */
+
+/* Subtree sizes of records [begin, end), whose children (made later) are
+ * already sized. */
+__kernel void KdBuild_subtree_size(const __global int4 *rec_info,
+                                   const int begin, const int end,
+                                   __global int *size) {
+    int p = begin + get_global_id(0);
+    if (p >= end) return;
+    int4 info = rec_info[p];
+    size[p] = info.x == KD_LEAF ? 1 : 1 + size[info.y] + size[info.z];
+}
+
+/* Preorder addresses of the children of records [begin, end), whose own
+ * addresses are known: the left child follows its parent, the right
+ * child follows the left subtree. */
+__kernel void KdBuild_preorder(const __global int4 *rec_info,
+                               const __global int *size, const int begin,
+                               const int end, __global int *addr) {
+    int p = begin + get_global_id(0);
+    if (p >= end) return;
+    int4 info = rec_info[p];
+    if (info.x == KD_LEAF) return;
+    addr[info.y] = addr[p] + 1;
+    addr[info.z] = addr[p] + 1 + size[info.y];
+}
+
+/* Every record to its preorder KdNode. */
+__kernel void KdBuild_output(const __global int4 *rec_info,
+                             const __global float *rec_split,
+                             const __global int *addr, const int n,
+                             __global KdNode *nodes) {
+    int p = get_global_id(0);
+    if (p >= n) return;
+    int4 info = rec_info[p];
+    KdNode node;
+    if (info.x == KD_LEAF) {
+        node.split = 0.0f;
+        node.axis = KD_LEAF;
+        node.child = info.y;
+        node.count = info.z;
+    } else {
+        node.split = rec_split[p];
+        node.axis = info.x;
+        node.child = addr[info.z];
+        node.count = 0;
+    }
+    nodes[addr[p]] = node;
+}

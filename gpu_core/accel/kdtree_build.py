@@ -1,0 +1,370 @@
+"""Breadth-first kd-tree build on the device [ZHWG08] (kdtree_build.cl).
+
+The host launches the kernels of one level at a time and reads back only
+counts (scan totals) to size the next level's arrays:
+
+* large-node stage: chunk bounds, node bounds, empty-space cut or spatial
+  median split, triangles clipped to the children, counts and compaction
+  by prefix sums; children with at most ``SMALL`` triangles become small roots;
+* small-node stage: candidate planes and their 64-bit side masks per small
+  root, the SAH of every candidate of every node (a work-item per node on a
+  CPU, a work-group per node elsewhere), a leaf where not splitting is
+  cheaper;
+* output stage: subtree sizes bottom-up, preorder addresses top-down, then
+  the ``KdNode`` array (device/layout.py) and the leaf triangle lists.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+from pyopencl import cltypes
+
+from ..device import Device, primitives
+from ..device.constants import KD_LEAF as LEAF
+from ..device.constants import KD_MAX_DEPTH as MAX_DEPTH
+from ..device.layout import KDNODE_DTYPE
+from ..device.timer import StageTimer
+
+CHUNK = 256  # elements per chunk of the large-node stage
+SMALL = 64  # largest small node (the width of its element mask)
+EMPTY_RATIO = 0.25  # empty fraction of a side that is cut off
+COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests
+SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
+ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
+PROGRAM = "accel/kdtree_build.cl"
+
+
+def depth_limit(triangle_count: int) -> int:
+    """Deepest level for ``triangle_count`` triangles (within the traversal stack)."""
+    return min(MAX_DEPTH, int(12 + 1.5 * math.log2(max(triangle_count, 1))))
+
+
+@dataclass
+class BuildOutput:
+    """Device arrays of a built tree, its root box and statistics."""
+
+    nodes: cla.Array
+    leaf_tris: cla.Array
+    bmin: np.ndarray  # (4,) float32, padded root box
+    bmax: np.ndarray
+    stats: dict
+
+
+def programs(device: Device, sah_lanes: int | None = None) -> list[tuple[str, dict]]:
+    """The programs a build uses (for building them up front)."""
+    return [(PROGRAM, _Config(device, sah_lanes).defines)]
+
+
+class _Config:
+    """Group sizes and the program's defines on one device."""
+
+    def __init__(self, device: Device, sah_lanes: int | None):
+        max_group = int(device.device.max_work_group_size)
+        self.chunk_group = 1 << int(math.log2(min(CHUNK, max_group)))
+        self.sah_group = 1 << int(math.log2(min(SAH_GROUP, max_group)))
+        # a CPU runs a node's candidates best in one work-item (no barriers);
+        # other devices spread them over a work-group
+        if sah_lanes is None:
+            sah_lanes = 1 if device.is_cpu else self.sah_group
+        self.sah_lanes = min(sah_lanes, self.sah_group)
+        self.defines = {
+            "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
+            "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_SAH_GROUP": self.sah_group, "KD_SAH_LANES": self.sah_lanes,
+        }
+
+
+def _scan(device: Device, dtype, arguments: str, input_expr: str, neutral: str = "0"):
+    """An exclusive scan writing its total to total[0]."""
+    return primitives.scan_kernel(device, dtype, arguments, input_expr,
+                                  "out[i] = prev_item; if (i + 1 == n) total[0] = item;", neutral=neutral)
+
+
+class _Primitives:
+    """The scans and reductions of the build, made once per device."""
+
+    def __init__(self, device: Device):
+        self.chunk_scan = _scan(device, np.int32,
+                                "__global const int4 *info, __global int *out, __global int *total, const int n",
+                                f"(info[i].y + {CHUNK - 1}) / {CHUNK}")
+        self.long_scan = _scan(device, np.int64,
+                               "__global const long *in, __global long *out, __global long *total, const int n", "in[i]")
+        self.counter_scan = _scan(device, cltypes.int8,
+                                  "__global const int8 *in, __global int8 *out, __global int8 *total, const int n",
+                                  "in[i]", neutral="(int8)(0)")
+        self.rank_scan = _scan(device, np.int64,
+                               "__global const int *best, __global const ulong *mask, __global long *out, "
+                               "__global long *total, const int n",
+                               "best[i] >= 0 ? 1L : ((long)popcount(mask[i]) << 32)")
+        area = "(2.0f * ((hi[i].x - lo[i].x) * (hi[i].y - lo[i].y) + (hi[i].y - lo[i].y) * " \
+               "(hi[i].z - lo[i].z) + (hi[i].z - lo[i].z) * (hi[i].x - lo[i].x)))"
+        self.sah = primitives.reduction_kernel(
+            device, np.float32, "0", "a + b", f"(info[i].x == {LEAF} ? (float)info[i].z : {COST_TRAVERSE!r}f) * {area}",
+            "__global const int4 *info, __global const float4 *lo, __global const float4 *hi")
+        self.leaf_stats = primitives.reduction_kernel(
+            device, cltypes.int4, "(int4)(0)", "(int4)(a.x + b.x, a.y + b.y, max(a.z, b.z), max(a.w, b.w))",
+            f"(info[i].x == {LEAF} ? (int4)(1, info[i].z, info[i].z, info[i].w) : (int4)(0, 0, 0, info[i].w))",
+            "__global const int4 *info")
+
+
+class _Growing:
+    """A device array appended to level by level, doubling its capacity."""
+
+    def __init__(self, device: Device, dtype, capacity: int):
+        self.device = device
+        self.array = device.array(capacity, dtype)
+
+    def reserve(self, size: int) -> cla.Array:
+        if size > self.array.size:
+            bigger = self.device.array(max(int(size), 2 * self.array.size), self.array.dtype)
+            self.device.copy(bigger.data, self.array.data, self.array.nbytes)
+            self.array = bigger
+        return self.array
+
+    @property
+    def data(self) -> cl.Buffer:
+        return self.array.data
+
+
+def _values(device: Device, array: cla.Array, dtype) -> np.ndarray:
+    """The lanes of a device vector (or vectors) as a flat host array."""
+    return np.frombuffer(device.get(array).tobytes(), dtype).copy()
+
+
+class _Build:
+    """The state of one build: records (nodes in creation order), leaf lists,
+    small roots and their elements, as growing device arrays."""
+
+    def __init__(self, device: Device, verts: cla.Array, count: int, sah_lanes: int | None):
+        self.device = device
+        self.config = _Config(device, sah_lanes)
+        self.prim = device.memo(("kdtree_build", "primitives"), lambda: _Primitives(device))
+        self.verts = verts
+        self.count = count
+        self.max_depth = depth_limit(count)
+        self.timer = StageTimer(device.queue)
+        n = 2 * count + 1
+        self.rec_lo, self.rec_hi = _Growing(device, cltypes.float4, n), _Growing(device, cltypes.float4, n)
+        self.rec_info, self.rec_split = _Growing(device, cltypes.int4, n), _Growing(device, np.float32, n)
+        self.rec_count = 1
+        self.batches = [(0, 1)]  # record ranges in creation order; children come after parents
+        self.leaf_tris, self.leaf_count = _Growing(device, np.int32, n), 0
+        self.small_roots = _Growing(device, cltypes.int4, count // 16 + 1)
+        self.sel_tri, self.sel_lo, self.sel_hi = (_Growing(device, t, n) for t in (np.int32, cltypes.float4, cltypes.float4))
+        self.root_count = self.small_count = 0
+        self.large_levels = self.small_levels = 0
+
+    def kernel(self, name: str):
+        return self.device.kernel(PROGRAM, name, self.config.defines)
+
+    def setup(self) -> None:
+        """Root box, clipping tolerance, the root record and the elements."""
+        dev, count = self.device, self.count
+        lo, hi = primitives.bounds(dev, self.verts.data, 3 * count) if count else (np.zeros(4, np.float32),) * 2
+        lo, hi = lo.copy(), hi.copy()
+        lo[3] = hi[3] = 0.0
+        self.lo, self.hi = lo, hi
+        magnitude = float(max(np.abs(lo[:3]).max(), np.abs(hi[:3]).max()))
+        self.eps = np.float32(max(magnitude * 2.0**-20, 1e-30))
+        dev.write(self.rec_lo.data, lo)
+        dev.write(self.rec_hi.data, hi)
+        dev.write(self.rec_info.data, np.array([LEAF, 0, 0, 0], np.int32))
+        self.el_tri, self.el_lo, self.el_hi = (dev.array(count, t) for t in (np.int32, cltypes.float4, cltypes.float4))
+        self.kernel("KdBuild_init")(count, self.verts.data, np.int32(count), self.el_tri.data, self.el_lo.data,
+                                    self.el_hi.data)
+
+    def large_stage(self) -> None:
+        """Median splits and empty-space cuts, level by level, until every
+        node is small or a leaf."""
+        dev, count = self.device, self.count
+        if 0 < count <= SMALL:
+            # the root is already small: its elements are the one small root's
+            self.sel_tri.array, self.sel_lo.array, self.sel_hi.array = self.el_tri, self.el_lo, self.el_hi
+            dev.write(self.small_roots.data, np.array([0, count, 0, 0], np.int32))
+            self.root_count, self.small_count = 1, count
+            return
+        if count == 0:
+            return
+        self.act_lo, self.act_hi, self.act_info = (dev.array(1, t) for t in (cltypes.float4, cltypes.float4, cltypes.int4))
+        dev.write(self.act_lo.data, self.lo)
+        dev.write(self.act_hi.data, self.hi)
+        dev.write(self.act_info.data, np.array([0, count, 0, 0], np.int32))
+        self.active, self.elements = 1, count
+        self.totals = (dev.array(1, np.int32), dev.array(1, np.int64), dev.array(1, cltypes.int8))
+        while self.active:
+            self.large_levels += 1
+            self._large_level()
+
+    def _large_level(self) -> None:
+        dev, prim, i32 = self.device, self.prim, np.int32
+        active, elements = self.active, self.elements
+        total_i, total_l, total_8 = self.totals
+        # chunks of every active node, and each chunk's bounds
+        chunk_base = dev.array(active, np.int32)
+        prim.chunk_scan(self.act_info, chunk_base, total_i, i32(active), size=active, queue=dev.queue)
+        chunks = int(dev.get(total_i)[0])
+        chunk_node = dev.array(chunks, np.int32)
+        chunk_lo, chunk_hi = dev.array(chunks, cltypes.float4), dev.array(chunks, cltypes.float4)
+        el_node = dev.array(elements, np.int32)
+        self.kernel("KdBuild_chunk_nodes")(active, self.act_info.data, chunk_base.data, i32(active), chunk_node.data)
+        self.kernel("KdBuild_chunk_bounds").groups(
+            chunks, self.config.chunk_group, self.act_info.data, chunk_base.data, chunk_node.data, self.el_lo.data,
+            self.el_hi.data, el_node.data, chunk_lo.data, chunk_hi.data)
+        # each node's plane, each element's sides and clipped boxes
+        node_split, node_mode = dev.array(active, np.float32), dev.array(active, np.int32)
+        self.kernel("KdBuild_large_split")(
+            active, self.act_lo.data, self.act_hi.data, self.act_info.data, chunk_base.data, chunk_lo.data,
+            chunk_hi.data, i32(active), node_split.data, node_mode.data)
+        flags = dev.array(elements, np.int64)
+        boxes = [dev.array(elements, cltypes.float4) for _ in range(4)]
+        self.kernel("KdBuild_large_classify")(
+            elements, self.verts.data, self.el_tri.data, self.el_lo.data, self.el_hi.data, el_node.data,
+            node_split.data, node_mode.data, i32(elements), self.eps, flags.data, *[b.data for b in boxes])
+        flag_scan = dev.array(elements, np.int64)
+        prim.long_scan(flags, flag_scan, total_l, i32(elements), size=elements, queue=dev.queue)
+        # children counts, with every node a leaf once the element budget is spent
+        node_counts, counters, counter_scan = (dev.array(active, t) for t in (cltypes.int2, cltypes.int8, cltypes.int8))
+        budget = ELEMENT_BUDGET * self.count + 65536
+        for force_leaf in (0, 1):
+            self.kernel("KdBuild_large_children")(
+                active, self.act_info.data, node_mode.data, flag_scan.data, total_l.data, i32(elements), i32(active),
+                i32(self.max_depth), i32(force_leaf), node_counts.data, counters.data)
+            prim.counter_scan(counters, counter_scan, total_8, i32(active), size=active, queue=dev.queue)
+            totals = _values(dev, total_8, np.int32)
+            if totals[0] <= budget:
+                break
+        next_elements, small_new, leaf_new, next_active, roots_new, rec_new = (int(t) for t in totals[:6])
+        self._reserve_records(rec_new)
+        self.small_roots.reserve(self.root_count + roots_new)
+        for grow in (self.sel_tri, self.sel_lo, self.sel_hi):
+            grow.reserve(self.small_count + small_new)
+        self.leaf_tris.reserve(self.leaf_count + leaf_new)
+        # the children: records, next level's nodes, small roots, leaves
+        next_lo, next_hi, next_info = (dev.array(next_active, t) for t in (cltypes.float4, cltypes.float4, cltypes.int4))
+        node_dest = dev.array(active, cltypes.int4)
+        self.kernel("KdBuild_large_emit")(
+            active, self.act_lo.data, self.act_hi.data, self.act_info.data, node_split.data, node_mode.data,
+            node_counts.data, counter_scan.data, i32(active), i32(self.max_depth), i32(force_leaf), i32(self.rec_count),
+            i32(self.root_count), i32(self.small_count), i32(self.leaf_count), self.rec_lo.data, self.rec_hi.data,
+            self.rec_info.data, self.rec_split.data, next_lo.data, next_hi.data, next_info.data,
+            self.small_roots.data, node_dest.data)
+        next_tri, next_el_lo, next_el_hi = (dev.array(next_elements, t) for t in (np.int32, cltypes.float4, cltypes.float4))
+        self.kernel("KdBuild_large_scatter")(
+            elements, self.el_tri.data, el_node.data, self.act_info.data, flags.data, flag_scan.data,
+            *[b.data for b in boxes], node_dest.data, i32(elements), next_tri.data, next_el_lo.data, next_el_hi.data,
+            self.sel_tri.data, self.sel_lo.data, self.sel_hi.data, self.leaf_tris.data)
+        self.batches.append((self.rec_count, self.rec_count + rec_new))
+        self.rec_count += rec_new
+        self.root_count += roots_new
+        self.small_count += small_new
+        self.leaf_count += leaf_new
+        self.act_lo, self.act_hi, self.act_info, self.active = next_lo, next_hi, next_info, next_active
+        self.el_tri, self.el_lo, self.el_hi, self.elements = next_tri, next_el_lo, next_el_hi, next_elements
+
+    def _reserve_records(self, extra: int) -> None:
+        for grow in (self.rec_lo, self.rec_hi, self.rec_info, self.rec_split):
+            grow.reserve(self.rec_count + extra)
+
+    def small_stage(self) -> None:
+        """Split every small root down to its leaves by the SAH, level by level."""
+        if not self.root_count:
+            return
+        dev, i32 = self.device, np.int32
+        roots, small = self.root_count, self.small_count
+        sel_root = dev.array(small, np.int32)
+        self.sn_node, self.sn_mask = dev.array(roots, cltypes.int2), dev.array(roots, np.uint64)
+        self.kernel("KdBuild_small_init")(roots, self.small_roots.data, i32(roots), sel_root.data, self.sn_node.data,
+                                          self.sn_mask.data)
+        self.cand = dev.array(6 * small, cltypes.ulong2)
+        self.kernel("KdBuild_small_masks")(6 * small, self.small_roots.data, sel_root.data, self.sel_lo.data,
+                                           self.sel_hi.data, i32(6 * small), self.cand.data)
+        self.small_total = dev.array(1, np.int64)
+        self.small_active = roots
+        while self.small_active:
+            self.small_levels += 1
+            self._small_level()
+
+    def _small_level(self) -> None:
+        dev, i32, config = self.device, np.int32, self.config
+        active = self.small_active
+        best = dev.array(active, np.int32)
+        groups = -(-active * config.sah_lanes // config.sah_group)
+        self.kernel("KdBuild_small_best").groups(
+            groups, config.sah_group, self.sn_node.data, self.sn_mask.data, self.small_roots.data, self.rec_lo.data,
+            self.rec_hi.data, self.rec_info.data, self.sel_lo.data, self.sel_hi.data, self.cand.data, i32(active),
+            i32(self.max_depth), best.data)
+        rank = dev.array(active, np.int64)
+        self.prim.rank_scan(best, self.sn_mask, rank, self.small_total, i32(active), size=active, queue=dev.queue)
+        packed = int(dev.get(self.small_total)[0])
+        splits, leaf_new = packed & 0xFFFFFFFF, packed >> 32
+        self._reserve_records(2 * splits)
+        self.leaf_tris.reserve(self.leaf_count + leaf_new)
+        next_node, next_mask = dev.array(2 * splits, cltypes.int2), dev.array(2 * splits, np.uint64)
+        self.kernel("KdBuild_small_emit")(
+            active, self.sn_node.data, self.sn_mask.data, best.data, rank.data, self.small_roots.data,
+            self.sel_tri.data, self.sel_lo.data, self.sel_hi.data, self.cand.data, i32(active), i32(self.rec_count),
+            i32(self.leaf_count), self.rec_lo.data, self.rec_hi.data, self.rec_info.data, self.rec_split.data,
+            next_node.data, next_mask.data, self.leaf_tris.data)
+        self.batches.append((self.rec_count, self.rec_count + 2 * splits))
+        self.rec_count += 2 * splits
+        self.leaf_count += leaf_new
+        self.sn_node, self.sn_mask, self.small_active = next_node, next_mask, 2 * splits
+
+    def output_stage(self) -> cla.Array:
+        """Preorder addresses (subtree sizes bottom-up, addresses top-down),
+        then the node array."""
+        dev, i32, n = self.device, np.int32, self.rec_count
+        size, addr = dev.array(n, np.int32), dev.array(n, np.int32)
+        for begin, end in reversed(self.batches):
+            self.kernel("KdBuild_subtree_size")(end - begin, self.rec_info.data, i32(begin), i32(end), size.data)
+        dev.fill(addr.data, 0, 4)
+        for begin, end in self.batches:
+            self.kernel("KdBuild_preorder")(end - begin, self.rec_info.data, size.data, i32(begin), i32(end), addr.data)
+        nodes = dev.array(n, KDNODE_DTYPE)
+        self.kernel("KdBuild_output")(n, self.rec_info.data, self.rec_split.data, addr.data, i32(n), nodes.data)
+        return nodes
+
+    def statistics(self) -> dict:
+        """Node, leaf and depth counts and the SAH cost, reduced on the device."""
+        dev, q, n = self.device, self.device.queue, self.rec_count
+        info = self.rec_info.array
+        leaves, leaf_sum, leaf_max, depth = (int(x) for x in _values(
+            dev, self.prim.leaf_stats(info, range=slice(n), queue=q), np.int32))
+        sah = float(dev.get(self.prim.sah(info, self.rec_lo.array, self.rec_hi.array, range=slice(n), queue=q)))
+        d = (self.hi - self.lo)[:3].astype(np.float64)
+        root_area = 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0])
+        return {
+            "nodes": n, "leaves": leaves, "depth": depth,
+            "mean_leaf_size": leaf_sum / leaves if leaves else 0.0, "max_leaf_size": leaf_max,
+            "leaf_references": leaf_sum, "sah_cost": sah / root_area if root_area > 0 else float(leaf_sum),
+            "large_levels": self.large_levels, "small_roots": self.root_count, "small_levels": self.small_levels,
+        }
+
+
+def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None) -> BuildOutput:
+    """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
+
+    ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
+    per node of the SAH search; by default 1 on a CPU, else ``SAH_GROUP``.
+    The tree is the same whatever it is.
+    """
+    build = _Build(device, verts, count, sah_lanes)
+    timer = build.timer
+    with timer.stage("setup"):
+        build.setup()
+    with timer.stage("large"):
+        build.large_stage()
+    with timer.stage("small"):
+        build.small_stage()
+    with timer.stage("output"):
+        nodes = build.output_stage()
+    stats = build.statistics()
+    stats["ms"] = timer.ms
+    bmin = (build.lo - build.eps).astype(np.float32)
+    bmax = (build.hi + build.eps).astype(np.float32)
+    bmin[3] = bmax[3] = 0.0
+    return BuildOutput(nodes=nodes, leaf_tris=build.leaf_tris.array, bmin=bmin, bmax=bmax, stats=stats)

@@ -1,0 +1,191 @@
+/* Closest-hit and any-hit traversal of the triangle kd-tree (KdNode, accel/kdtree.h):
+ * front-to-back descent with a fixed stack (the builder never makes a tree
+ * deeper than KD_MAX_DEPTH) and a watertight ray/triangle test [Woop,
+ * Benthin, Wald 2013], so rays through shared edges and corners do not slip
+ * between triangles. */
+#ifndef GPUGI_KDTREE_TRAVERSE_H
+#define GPUGI_KDTREE_TRAVERSE_H
+#include "accel/kdtree.h"
+#include "device/axis.h"
+
+/* Relative rounding error allowed for in the ray's distances to planes. */
+#define KD_T_SLACK 1.0e-6f
+
+/* A ray set up for the watertight test: corners are moved to the ray
+ * origin, their axes permuted so the ray's dominant axis is z (keeping
+ * the winding), then sheared so the ray runs along +z. */
+typedef struct {
+    float4 org;
+    uint4 perm; /* kx, ky, kz, w */
+    float sx, sy, sz;
+} KdRay;
+
+inline KdRay KdTree_ray(float3 org, float3 dir) {
+    float3 ad = fabs(dir);
+    int kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
+    int kx = kz == 2 ? 0 : kz + 1;
+    int ky = kx == 2 ? 0 : kx + 1;
+    float dz = Axis_of3(dir, kz);
+    if (dz < 0.0f) {
+        int swap = kx;
+        kx = ky;
+        ky = swap;
+    }
+    KdRay ray;
+    ray.org = (float4)(org, 0.0f);
+    ray.perm = (uint4)(kx, ky, kz, 3);
+    ray.sx = Axis_of3(dir, kx) / dz;
+    ray.sy = Axis_of3(dir, ky) / dz;
+    ray.sz = 1.0f / dz;
+    return ray;
+}
+
+/* Watertight ray/triangle test; on a hit with t in (tmin, tmax) writes t
+ * and the barycentric weights u of v1 and v of v2. Edge functions of an
+ * edge shared by two triangles are exact negations (no contraction into
+ * fused multiply-adds), and an edge value of exactly 0 counts as inside. */
+inline bool KdTree_triangle(const KdRay *ray, float4 v0, float4 v1, float4 v2,
+                            float tmin, float tmax, float *t, float *u,
+                            float *v) {
+#pragma OPENCL FP_CONTRACT OFF
+    float4 a = shuffle(v0 - ray->org, ray->perm);
+    float4 b = shuffle(v1 - ray->org, ray->perm);
+    float4 c = shuffle(v2 - ray->org, ray->perm);
+    float ax = a.x - ray->sx * a.z, ay = a.y - ray->sy * a.z;
+    float bx = b.x - ray->sx * b.z, by = b.y - ray->sy * b.z;
+    float cx = c.x - ray->sx * c.z, cy = c.y - ray->sy * c.z;
+    float e0 = cx * by - cy * bx;
+    float e1 = ax * cy - ay * cx;
+    float e2 = bx * ay - by * ax;
+    if ((e0 < 0.0f || e1 < 0.0f || e2 < 0.0f) && (e0 > 0.0f || e1 > 0.0f || e2 > 0.0f))
+        return false;
+    float det = e0 + e1 + e2;
+    if (det == 0.0f) return false;
+    float inv = 1.0f / det;
+    float tt = (e0 * a.z + e1 * b.z + e2 * c.z) * ray->sz * inv;
+    if (!(tt > tmin && tt < tmax)) return false;
+    *t = tt;
+    *u = e1 * inv;
+    *v = e2 * inv;
+    return true;
+}
+
+/* Clip [tmin, tmax] to the root box; false when the ray misses it. */
+inline bool KdTree_clip_root(const KdTree *tree, float3 org, float3 inv_dir,
+                             float *tmin, float *tmax) {
+    float3 t0 = (tree->bmin - org) * inv_dir;
+    float3 t1 = (tree->bmax - org) * inv_dir;
+    float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
+    float a = fmax(fmax(lo.x, lo.y), fmax(lo.z, *tmin));
+    float b = fmin(fmin(hi.x, hi.y), fmin(hi.z, *tmax));
+    if (!(a <= b)) return false;
+    *tmin = a;
+    *tmax = b;
+    return true;
+}
+
+/* Shared descent: with any_hit set, returns at the first hit found. Each
+ * leaf tests its triangles over the whole ray interval, so a triangle is
+ * found in whichever of its leaves the ray reaches first. Cell intervals
+ * [t0, t1] are widened by the rounding error of the plane distances, so a
+ * ray through a cell's edge or corner never skips the cell it hits in;
+ * the search stops once the closest hit so far lies before t_exit, where
+ * the cell ends for certain. */
+inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
+                            float tmin, float tmax, bool any_hit, Hit *hit) {
+    hit->t = tmax;
+    hit->tri = -1;
+    hit->u = hit->v = 0.0f;
+    float3 inv_dir = 1.0f / dir;
+    float t0 = tmin, t1 = tmax;
+    if (!KdTree_clip_root(tree, org, inv_dir, &t0, &t1)) return false;
+    KdRay ray = KdTree_ray(org, dir);
+    /* absolute error of (split - org) / dir on each axis */
+    float3 reach = fmax(fmax(fabs(org), fabs(tree->bmin)), fabs(tree->bmax));
+    float3 slack = KD_T_SLACK * fmax(fmax(reach.x, reach.y), reach.z) * fabs(inv_dir);
+    float t_exit = t1;
+    int stack_node[KD_MAX_DEPTH];
+    float stack_t0[KD_MAX_DEPTH], stack_t1[KD_MAX_DEPTH], stack_exit[KD_MAX_DEPTH];
+    int top = 0;
+    int node = 0;
+    while (true) {
+        KdNode n = tree->nodes[node];
+        /* descend to the first leaf along the ray, stacking the second
+         * side of every plane the interval may cross */
+        while (n.axis != KD_LEAF) {
+            float inv = Axis_of3(inv_dir, n.axis);
+            float t_split = (n.split - Axis_of3(org, n.axis)) * inv;
+            /* the side the ray is on before the plane: below unless it runs downwards */
+            int first = inv < 0.0f ? n.child : node + 1;
+            int second = inv < 0.0f ? node + 1 : n.child;
+            if (isnan(t_split)) { /* the ray runs inside the plane: both sides */
+                stack_node[top] = second;
+                stack_t0[top] = t0;
+                stack_t1[top] = t1;
+                stack_exit[top] = t_exit;
+                top++;
+                t_exit = fmin(t_exit, t0); /* the sides overlap: no early stop */
+                node = first;
+                n = tree->nodes[node];
+                continue;
+            }
+            if (isinf(t_split)) { /* parallel to the plane: one side only */
+                node = t_split > 0.0f ? first : second;
+                n = tree->nodes[node];
+                continue;
+            }
+            float err = Axis_of3(slack, n.axis) + KD_T_SLACK * fabs(t_split);
+            bool visit_first = t_split + err >= t0;
+            bool visit_second = t_split - err <= t1;
+            if (visit_first && visit_second) {
+                stack_node[top] = second;
+                stack_t0[top] = fmax(t0, t_split - err);
+                stack_t1[top] = t1;
+                stack_exit[top] = t_exit;
+                top++;
+                t1 = fmin(t1, t_split + err);
+                t_exit = fmin(t_exit, t_split - err);
+            }
+            node = visit_first ? first : second;
+            n = tree->nodes[node];
+        }
+        /* leaf: its triangles against the whole remaining ray */
+        for (int i = 0; i < n.count; ++i) {
+            int tri = tree->leaf_tris[n.child + i];
+            float t, u, v;
+            if (KdTree_triangle(&ray, tree->verts[3 * tri], tree->verts[3 * tri + 1],
+                                tree->verts[3 * tri + 2], tmin, hit->t, &t, &u, &v)) {
+                hit->t = t;
+                hit->tri = tri;
+                hit->u = u;
+                hit->v = v;
+                if (any_hit) return true;
+            }
+        }
+        if (hit->tri >= 0 && hit->t <= t_exit) return true;
+        /* next stacked cell that may still hold a closer hit */
+        do {
+            if (top == 0) return hit->tri >= 0;
+            top--;
+        } while (stack_t0[top] > hit->t);
+        node = stack_node[top];
+        t0 = stack_t0[top];
+        t1 = stack_t1[top];
+        t_exit = stack_exit[top];
+    }
+}
+
+/* Closest hit along org + t dir, t in (tmin, tmax); hit->tri = -1 on a miss. */
+inline bool KdTree_intersect(const KdTree *tree, float3 org, float3 dir,
+                             float tmin, float tmax, Hit *hit) {
+    return KdTree_traverse(tree, org, dir, tmin, tmax, false, hit);
+}
+
+/* Whether anything blocks org + t dir for t in (tmin, tmax). */
+inline bool KdTree_occluded(const KdTree *tree, float3 org, float3 dir,
+                            float tmin, float tmax) {
+    Hit hit;
+    return KdTree_traverse(tree, org, dir, tmin, tmax, true, &hit);
+}
+
+#endif

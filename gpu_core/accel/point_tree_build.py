@@ -1,0 +1,253 @@
+"""Device build of the point kd-tree (point_tree_build.cl), level by level.
+
+The host loops over tree levels and reads back only list sizes; every
+kernel works on all nodes (or point chunks) of a level at once:
+
+* large-node stage: median splits and empty-space cuts;
+* small-node stage: VVH splits over bit masks of each small root's points;
+* output stage: sums bottom-up (sizes, photon power, positions), preorder
+  addresses top-down, then the traversal nodes, the node payloads
+  (``PointNode``) and the points in leaf order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl.array as cla
+
+from ..device import Device, primitives
+from ..device.constants import POINT_BUILD_SMALL as SMALL_MAX
+from ..device.constants import POINT_TREE_MAX_DEPTH as MAX_DEPTH
+from ..device.layout import BUILD_NODE_DTYPE, BUILD_SUMS_DTYPE, CHUNK_DTYPE, KDNODE_DTYPE, POINT_NODE_DTYPE, float4_rows
+from ..device.timer import StageTimer
+
+EMPTY_RATIO = 0.1  # empty fraction of a cell that is cut off, retuned for points
+COST_TRAVERSE = 3.0  # VVH cost of visiting a node, in point tests (kNN fastest at 3 on photon maps)
+PROGRAM = "accel/point_tree_build.cl"
+
+
+@dataclass
+class BuildParams:
+    """Knobs of the build; the defaults suit kNN with k about k_hint."""
+
+    k_hint: float = 50.0  # the k the VVH radius is estimated for
+    radius: float | None = None  # search radius R of the VVH; None: estimated from the points
+    cost_traverse: float = COST_TRAVERSE
+    empty_ratio: float = EMPTY_RATIO
+    max_depth: int = MAX_DEPTH
+
+
+@dataclass
+class BuiltTree:
+    """Device arrays of a finished tree, in preorder and leaf order."""
+
+    nodes: cla.Array  # KdNode
+    info: cla.Array  # PointNode
+    points: cla.Array  # float4, w = original index (int bits)
+    power: cla.Array | None
+    direction: cla.Array | None
+    normal: cla.Array | None
+    node_count: int
+    radius: float
+    stats: dict = field(default_factory=dict)
+
+
+class _NodeTable:
+    """The growing array of build nodes; children always land after their parent."""
+
+    def __init__(self, device: Device, capacity: int):
+        self.device = device
+        self.array = device.array(max(capacity, 16), BUILD_NODE_DTYPE)
+        self.count = 0
+
+    def reserve(self, extra: int) -> int:
+        """Room for ``extra`` more nodes; returns the id of the first one."""
+        need = self.count + extra
+        if need > len(self.array):
+            bigger = self.device.array(max(need, 2 * len(self.array)), BUILD_NODE_DTYPE)
+            self.device.copy(bigger.data, self.array.data, self.count * BUILD_NODE_DTYPE.itemsize)
+            self.array = bigger
+        base = self.count
+        self.count = need
+        return base
+
+
+def points_on_device(device: Device, points: np.ndarray) -> cla.Array:
+    """(N, 4) float32 device array: xyz, and the point's index in w (int bits)."""
+    work4 = float4_rows(points)
+    work4[:, 3] = np.arange(len(points), dtype=np.int32).view(np.float32)
+    return device.array_from(work4)
+
+
+class _Build:
+    """The state of one build: the node table, the working point array and
+    the batches of nodes made per level (children after parents)."""
+
+    def __init__(self, device: Device, points: cla.Array, photons: tuple | None, params: BuildParams):
+        self.device = device
+        self.params = params
+        n = self.n = len(points)
+        self.work = device.array(max(n, 1) * 4, np.float32).reshape(max(n, 1), 4)
+        device.copy(self.work.data, points.data, n * 16, src_offset=points.offset)
+        self.scratch = cla.empty_like(self.work)
+        self.has_photons = np.int32(photons is not None and n > 0)
+        self.photons = list(photons) if self.has_photons else [device.array(4, np.float32) for _ in range(3)]
+        self.table = _NodeTable(device, 2 * max(n, 1) // 8 + 64)
+        self.table.reserve(1)
+        root = np.zeros(1, BUILD_NODE_DTYPE)
+        root["lo"], root["hi"] = np.inf, -np.inf
+        root["count"], root["root"], root["left"] = n, -1, -1
+        device.write(self.table.array.data, root)
+        self.batches = [(0, 1)]
+        self.max_depth = np.int32(min(params.max_depth, MAX_DEPTH))
+        self.small_parts = [device.array_from(np.zeros(1, np.int32))] if 2 <= n <= SMALL_MAX else []
+        self.large_levels = self.small_levels = 0
+
+    def launch(self, name: str, n: int, *args) -> None:
+        self.device.kernel(PROGRAM, name)(n, *args)
+
+    def large_stage(self) -> None:
+        """Median splits and empty-space cuts, level by level."""
+        dev = self.device
+        active = dev.array_from(np.zeros(1, np.int32))
+        n_active = 1 if self.n > SMALL_MAX else 0
+        while n_active:
+            self.large_levels += 1
+            active, n_active = self._large_level(active, n_active)
+
+    def _large_level(self, active: cla.Array, n_active: int) -> tuple[cla.Array, int]:
+        dev, nodes, i32 = self.device, self.table.array, np.int32
+        # the chunks of every active node, and their bounds
+        counts = dev.array(n_active, np.int32)
+        self.launch("PointBuild_chunk_counts", n_active, active.data, nodes.data, counts.data, i32(n_active))
+        chunk_end = primitives.inclusive_sum(dev, counts)
+        n_chunks = int(dev.get(chunk_end[n_active - 1: n_active])[0])
+        chunks = dev.array(n_chunks, CHUNK_DTYPE)
+        chunk_lo, chunk_hi = dev.array(4 * n_chunks, np.float32), dev.array(4 * n_chunks, np.float32)
+        chunk_left, left_end = dev.array(n_chunks, np.int32), dev.array(n_chunks, np.int32)
+        self.launch("PointBuild_chunks", n_active, active.data, nodes.data, chunk_end.data, chunks.data, i32(n_active))
+        self.launch("PointBuild_chunk_bounds", n_chunks, chunks.data, self.work.data, chunk_lo.data, chunk_hi.data,
+                    i32(n_chunks))
+        # each node's cut or split, then its points partitioned stably
+        self.launch("PointBuild_large_decide", n_active, active.data, nodes.data, chunk_end.data, chunk_lo.data,
+                    chunk_hi.data, np.float32(self.params.empty_ratio), i32(n_active))
+        self.launch("PointBuild_chunk_count_left", n_chunks, chunks.data, active.data, nodes.data, self.work.data,
+                    chunk_left.data, i32(n_chunks))
+        primitives.inclusive_sum(dev, chunk_left, left_end)
+        base = self.table.reserve(2 * n_active)
+        nodes = self.table.array
+        self.launch("PointBuild_large_split", n_active, active.data, nodes.data, chunk_end.data, left_end.data,
+                    i32(base), i32(n_active))
+        self.launch("PointBuild_chunk_scatter", n_chunks, chunks.data, active.data, nodes.data, self.work.data,
+                    self.scratch.data, chunk_left.data, left_end.data, i32(n_chunks))
+        self.launch("PointBuild_chunk_copy", n_chunks, chunks.data, self.scratch.data, self.work.data, i32(n_chunks))
+        self.batches.append((base, 2 * n_active))
+        # children: small roots and the next level's large nodes
+        classes = dev.array(2 * n_active, np.int32)
+        self.launch("PointBuild_classify", 2 * n_active, nodes.data, i32(base), i32(2 * n_active), self.max_depth,
+                    classes.data)
+        smalls, n_small = primitives.compact(dev, classes, 2, base)
+        if n_small:
+            self.small_parts.append(smalls[:n_small])
+        return primitives.compact(dev, classes, 1, base)
+
+    def small_stage(self) -> None:
+        """VVH splits over bit masks of each small root's points."""
+        dev, i32 = self.device, np.int32
+        roots = _cat(dev, self.small_parts, np.int32)
+        n_roots = self.n_roots = sum(len(p) for p in self.small_parts)
+        self.masks = dev.array(max(n_roots, 1) * 3 * SMALL_MAX, np.uint32)
+        root_radius = dev.array(n_roots, np.float32)
+        self.launch("PointBuild_small_roots", n_roots, roots.data, self.table.array.data, self.work.data,
+                    self.masks.data, root_radius.data, np.float32(self.params.k_hint), i32(n_roots))
+        self.radius = self._vvh_radius(root_radius, n_roots)
+        active, n_active = roots, n_roots
+        while n_active:
+            self.small_levels += 1
+            active, n_active = self._small_level(active, n_active)
+
+    def _vvh_radius(self, root_radius: cla.Array, n_roots: int) -> float:
+        """The search radius of the VVH: given, else the median of the small
+        roots' estimates."""
+        if self.params.radius is not None:
+            return max(float(self.params.radius), 0.0)
+        estimates = self.device.get(root_radius)[:n_roots]
+        estimates = estimates[np.isfinite(estimates) & (estimates > 0)]
+        return float(np.median(estimates)) if estimates.size else 0.0
+
+    def _small_level(self, active: cla.Array, n_active: int) -> tuple[cla.Array, int]:
+        dev, i32 = self.device, np.int32
+        flag, cand = dev.array(n_active, np.int32), dev.array(n_active, np.int32)
+        self.launch("PointBuild_small_decide", n_active, active.data, self.table.array.data, self.work.data,
+                    self.masks.data, np.float32(self.radius), np.float32(self.params.cost_traverse), self.max_depth,
+                    flag.data, cand.data, i32(n_active))
+        splitting, n_split = primitives.compact(dev, flag, 1, 0)
+        if not n_split:
+            return active, 0
+        base = self.table.reserve(2 * n_split)
+        self.launch("PointBuild_small_split", n_split, splitting.data, active.data, self.table.array.data, cand.data,
+                    self.masks.data, i32(base), i32(n_split))
+        self.batches.append((base, 2 * n_split))
+        classes = dev.array(2 * n_split, np.int32)
+        self.launch("PointBuild_small_classify", 2 * n_split, self.table.array.data, i32(base), i32(2 * n_split),
+                    self.max_depth, classes.data)
+        return primitives.compact(dev, classes, 1, base)
+
+    def output_stage(self) -> tuple:
+        """Sums bottom-up, preorder addresses top-down, then every node and
+        point to its place."""
+        dev, i32 = self.device, np.int32
+        n, n_nodes, ph, nodes = self.n, self.table.count, self.photons, self.table.array
+        size, sums = dev.array(n_nodes, np.int32), dev.array(n_nodes, BUILD_SUMS_DTYPE)
+        for base, count in reversed(self.batches):
+            self.launch("PointBuild_sums", count, nodes.data, self.work.data, ph[0].data, ph[1].data, ph[2].data,
+                        self.has_photons, size.data, sums.data, i32(base), i32(count))
+        addr, first = dev.array(n_nodes, np.int32), dev.array(n_nodes, np.int32)
+        dev.fill(addr.data, 0, addr.nbytes)
+        dev.fill(first.data, 0, first.nbytes)
+        for base, count in self.batches:
+            self.launch("PointBuild_preorder", count, nodes.data, size.data, addr.data, first.data, i32(base), i32(count))
+        out_nodes, out_info = dev.array(n_nodes, KDNODE_DTYPE), dev.array(n_nodes, POINT_NODE_DTYPE)
+        out_pts = dev.array(max(n, 1) * 4, np.float32).reshape(max(n, 1), 4)
+        out_ph = [dev.array(max(n, 1) * 4, np.float32).reshape(max(n, 1), 4) for _ in range(3)]
+        self.launch("PointBuild_emit", n_nodes, nodes.data, sums.data, addr.data, first.data, self.work.data,
+                    ph[0].data, ph[1].data, ph[2].data, self.has_photons, np.float32(self.radius), out_nodes.data,
+                    out_info.data, out_pts.data, out_ph[0].data, out_ph[1].data, out_ph[2].data, i32(n_nodes))
+        return out_nodes, out_info, out_pts, out_ph
+
+
+def _cat(device: Device, parts: list[cla.Array], dtype) -> cla.Array:
+    """One device array holding ``parts`` in order."""
+    out = device.array(sum(len(p) for p in parts), dtype)
+    offset = 0
+    for p in parts:
+        if len(p):
+            device.copy(out.data, p.data, p.nbytes, dst_offset=offset * out.dtype.itemsize, src_offset=p.offset)
+            offset += len(p)
+    return out
+
+
+def build(device: Device, points: cla.Array, photons: tuple | None, params: BuildParams) -> BuiltTree:
+    """Build the tree over ``points``, an (N, 4) float32 device array with
+    each point's index in w (see points_on_device); ``photons`` is
+    ``(power, direction, normal)`` as (N, 4) float32 device arrays indexed
+    by that index, or None. The arrays are not modified."""
+    timer = StageTimer(device.queue)
+    state = _Build(device, points, photons, params)
+    with timer.stage("large"):
+        state.large_stage()
+    with timer.stage("small"):
+        state.small_stage()
+    with timer.stage("output"):
+        out_nodes, out_info, out_pts, out_ph = state.output_stage()
+    stats = {
+        "points": state.n, "nodes": state.table.count, "large_levels": state.large_levels,
+        "small_levels": state.small_levels, "small_roots": state.n_roots, "radius": state.radius, "ms": timer.ms,
+    }
+    with_photons = photons is not None
+    return BuiltTree(
+        nodes=out_nodes, info=out_info, points=out_pts,
+        power=out_ph[0] if with_photons else None, direction=out_ph[1] if with_photons else None,
+        normal=out_ph[2] if with_photons else None, node_count=state.table.count, radius=state.radius, stats=stats)

@@ -1,0 +1,149 @@
+/* k nearest neighbours in the point kd-tree: a bounded max-heap of k
+ * candidates, filled by a depth-first descent that visits the near child
+ * first and skips any subtree whose plane distance cannot beat the current
+ * k-th distance. KNN_K, a compile-time define, is the heap's capacity (the
+ * program is built per capacity) and every search's k; a program that
+ * also searches for fewer (KNN_VARIABLE_K: the cut lookup beside photon
+ * estimates) keeps k per search, at a small cost. */
+#ifndef GPUGI_POINT_TREE_KNN_H
+#define GPUGI_POINT_TREE_KNN_H
+#include "accel/point_tree.h"
+#include "device/axis.h"
+
+#ifndef KNN_K
+#error "KNN_K must be defined"
+#endif
+
+/* The candidate set: the first k candidates are appended, then made a
+ * max-heap (farthest first) whose top every later candidate replaces.
+ * Each entry is one 64-bit key, the squared distance's bits above the
+ * point's index: keys order as distances do (distances are never
+ * negative), and a move is one copy. `worst` bounds the search: the
+ * squared search radius until the set is full, then the farthest entry. */
+typedef struct {
+    ulong key[KNN_K];
+#ifdef KNN_VARIABLE_K
+    int k; /* entries wanted, at most KNN_K */
+#endif
+    int n; /* entries filled */
+    float worst;
+} Knn;
+
+/* The number of entries wanted */
+#ifdef KNN_VARIABLE_K
+#define Knn_wanted(h) ((h)->k)
+#else
+#define Knn_wanted(h) KNN_K
+#endif
+
+inline ulong Knn_key(float d2, int id) { return ((ulong)as_uint(d2) << 32) | (uint)id; }
+
+/* Squared distance and point (index in the tree's leaf order) of entry i;
+ * entries past Knn_count are empty. */
+inline float Knn_d2(const Knn *h, int i) { return as_float((uint)(h->key[i] >> 32)); }
+inline int Knn_id(const Knn *h, int i) { return (int)(uint)h->key[i]; }
+
+/* Empty, for the k nearest, bounded just beyond max_d2 so points at
+ * exactly max_d2 still enter. */
+inline void Knn_init(Knn *h, int k, float max_d2) {
+#ifdef KNN_VARIABLE_K
+    h->k = clamp(k, 1, KNN_K);
+#endif
+    h->n = 0;
+    h->worst = isinf(max_d2) ? INFINITY : nextafter(max_d2, INFINITY);
+}
+
+/* Put key at position i of a max-heap of n entries, moving larger
+ * children up. */
+inline void Knn_sift(Knn *h, int i, int n, ulong key) {
+    while (true) {
+        int c = 2 * i + 1;
+        if (c >= n) break;
+        if (c + 1 < n && h->key[c + 1] > h->key[c]) c++;
+        if (h->key[c] <= key) break;
+        h->key[i] = h->key[c];
+        i = c;
+    }
+    h->key[i] = key;
+}
+
+/* Make the first n entries a max-heap. */
+inline void Knn_heapify(Knn *h, int n) {
+    for (int i = n / 2 - 1; i >= 0; --i) Knn_sift(h, i, n, h->key[i]);
+}
+
+/* Add a candidate closer than h->worst. */
+inline void Knn_push(Knn *h, float d2, int id) {
+    if (h->n < Knn_wanted(h)) {
+        h->key[h->n] = Knn_key(d2, id);
+        if (++h->n < Knn_wanted(h)) return;
+        Knn_heapify(h, Knn_wanted(h));
+    } else {
+        Knn_sift(h, 0, Knn_wanted(h), Knn_key(d2, id));
+    }
+    h->worst = Knn_d2(h, 0);
+}
+
+/* Candidates found. */
+inline int Knn_count(const Knn *h) { return h->n; }
+
+/* Sort the candidates nearest first (then by index), in place: a heap sort
+ * (a full set is a heap already). */
+inline void Knn_sort(Knn *h) {
+    int n = h->n;
+    if (n < Knn_wanted(h)) Knn_heapify(h, n);
+    for (int end = n - 1; end > 0; --end) {
+        ulong top = h->key[0];
+        Knn_sift(h, 0, end, h->key[end]);
+        h->key[end] = top;
+    }
+}
+
+/* The k nearest points to q within sqrt(max_d2), left in h.
+ * Depth-first, near child first. A far child is pushed with the squared
+ * distance to its splitting plane; popped entries are skipped once that
+ * bound cannot beat the farthest candidate. (The tighter distance to the
+ * far cell, kept incrementally, measured no faster on photon maps.) */
+inline void PointTree_knn(const PointTree *tree, float3 q, int k, float max_d2, Knn *h) {
+    Knn_init(h, k, max_d2);
+    int stack_node[POINT_TREE_MAX_DEPTH + 4];
+    float stack_bound[POINT_TREE_MAX_DEPTH + 4];
+    int top = 0;
+    int node = 0;
+    while (true) {
+        KdNode nd = tree->nodes[node];
+        if (nd.axis != KD_LEAF) {
+            /* descend to the near side, remember the far side */
+            float diff = Axis_of3(q, nd.axis) - nd.split;
+            int near_child = diff < 0.0f ? node + 1 : nd.child;
+            int far_child = diff < 0.0f ? nd.child : node + 1;
+            float bound = diff * diff;
+            if (bound < h->worst) {
+                stack_node[top] = far_child;
+                stack_bound[top] = bound;
+                top++;
+            }
+            node = near_child;
+            continue;
+        }
+        /* leaf: test its points */
+        int end = nd.child + nd.count;
+        for (int i = nd.child; i < end; ++i) {
+            float3 d = tree->points[i].xyz - q;
+            float d2 = dot(d, d);
+            if (d2 < h->worst) Knn_push(h, d2, i);
+        }
+        /* next far side that can still hold a closer point */
+        node = -1;
+        while (top > 0) {
+            top--;
+            if (stack_bound[top] < h->worst) {
+                node = stack_node[top];
+                break;
+            }
+        }
+        if (node < 0) return;
+    }
+}
+
+#endif

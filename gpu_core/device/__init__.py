@@ -1,0 +1,9 @@
+"""The OpenCL device layer: device choice, programs, the launch helper,
+transfers, device primitives and the structs and constants shared with the
+kernels."""
+
+from .device import Device, Transfers
+from .programs import kernel_cache_dir, load_source
+from .select import get_device, list_devices
+
+__all__ = ["Device", "Transfers", "get_device", "kernel_cache_dir", "list_devices", "load_source"]

@@ -1,0 +1,61 @@
+"""Constants the host and the kernels share, declared once.
+
+Every name in capitals below reaches every program as a ``-D NAME=value``
+define (``defines()``), so no kernel file repeats a number the host also
+knows. Host modules import the names from here (``scene`` re-exports the
+light and camera kinds under their user-facing names).
+"""
+
+from __future__ import annotations
+
+# kd-trees (triangle and point): KdNode.axis of a leaf, deepest levels
+KD_LEAF = 3
+KD_MAX_DEPTH = 64  # triangle tree: build limit and traversal stack
+POINT_TREE_MAX_DEPTH = 60  # point tree: build limit and kNN stack
+POINT_BUILD_SMALL = 32  # points of a small point-tree node: the width of its bit masks
+
+# light rows (scene/tables.py, shading/lights.h)
+LIGHT_POINT = 0
+LIGHT_SPOT = 1
+LIGHT_SUN = 2
+LIGHT_AREA = 3
+LIGHT_MESH = 4  # all emissive triangles, sampled as one light row
+AREA_RECTANGLE = 0
+AREA_ELLIPSE = 1
+
+# cameras (shading/camera.h)
+CAMERA_PERSP = 0
+CAMERA_ORTHO = 1
+
+# light passes of the image kernel, in the order of image.LIGHT_PASSES
+PASS_DIFFUSE = 0  # +0 direct, +1 indirect
+PASS_GLOSSY = 2
+PASS_TRANSMISSION = 4
+PASS_EMISSION = 6
+PASS_ENVIRONMENT = 7
+PASS_CAUSTICS = 8
+PASS_SUMMED = 8  # passes before this one add up to Combined
+PASS_COUNT = 9
+
+# what the image kernel writes besides Combined, Depth and Normal (flags)
+OUTPUT_LIGHT_PASSES = 1
+OUTPUT_DENOISING = 2
+
+# photon tracing (photons/photon_trace.cl, photons/photon_emit.h)
+PHOTON_PASS_GLOBAL = 0  # every diffuse hit but those of caustic paths
+PHOTON_PASS_CAUSTIC = 1  # only paths light -> specular+ -> diffuse
+PHOTON_PASS_ALL = 2  # every diffuse hit (no caustic map traced)
+PHOTON_EMITTER_WORLD = -1  # emitter row of the world's radiance
+
+# density-estimation filters (photons/photon_density.h)
+PHOTON_FILTER_BOX = 0
+PHOTON_FILTER_CONE = 1
+PHOTON_FILTER_EPANECHNIKOV = 2
+
+# stable radix sort of the device primitives: bits per pass
+PRIM_RADIX_BITS = 4
+
+
+def defines() -> dict[str, int]:
+    """Every constant of this module, as program defines."""
+    return {name: value for name, value in globals().items() if name.isupper() and isinstance(value, int)}

@@ -1,0 +1,61 @@
+"""Launching kernels: the one launch helper, with the launch discipline.
+
+Every kernel is launched with a fixed local size per device and kernel
+(queried once: a multiple of the device's preferred multiple, 64 work-items
+on a CPU, 128 on a GPU, never above what the kernel allows), its global size
+padded to that (kernels guard their tail) and a zero offset, so a driver
+that compiles per launch shape compiles each kernel once. Kernels with
+barriers launch whole work-groups of their compile-time group size instead.
+
+Setting a kernel's arguments is not thread-safe in OpenCL: a launch sets
+them and enqueues under the kernel's own lock (the arguments are captured at
+enqueue), so the viewport worker and an F12 render can share kernels.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import pyopencl as cl
+
+_TARGET = {"cpu": 64, "gpu": 128}
+
+
+def local_size(kernel: cl.Kernel, device: cl.Device) -> int:
+    """The fixed local size of ``kernel`` on ``device``."""
+    info = cl.kernel_work_group_info
+    largest = int(kernel.get_work_group_info(info.WORK_GROUP_SIZE, device))
+    multiple = max(1, int(kernel.get_work_group_info(info.PREFERRED_WORK_GROUP_SIZE_MULTIPLE, device)))
+    target = _TARGET["cpu" if device.type & cl.device_type.CPU else "gpu"]
+    size = max(multiple, target // multiple * multiple)
+    while size > largest and size > multiple:
+        size -= multiple
+    if size > largest:  # the kernel allows less than one preferred multiple
+        size = 1 << (largest.bit_length() - 1)
+    return size
+
+
+class Kernel:
+    """One kernel of a built program, shared by every thread."""
+
+    def __init__(self, queue: cl.CommandQueue, kernel: cl.Kernel, device: cl.Device):
+        self.queue = queue
+        self.kernel = kernel
+        self.name = kernel.function_name
+        self.local = local_size(kernel, device)
+        self._lock = threading.Lock()
+
+    def __call__(self, n: int, *args) -> None:
+        """``n`` work-items (none when ``n`` <= 0), in groups of the fixed local size."""
+        if n > 0:
+            self._enqueue(-(-int(n) // self.local) * self.local, self.local, args)
+
+    def groups(self, count: int, group: int, *args) -> None:
+        """``count`` work-groups of ``group`` work-items (kernels with barriers)."""
+        if count > 0:
+            self._enqueue(int(count) * group, group, args)
+
+    def _enqueue(self, global_size: int, group: int, args) -> None:
+        with self._lock:
+            self.kernel.set_args(*args)
+            cl.enqueue_nd_range_kernel(self.queue, self.kernel, (global_size,), (group,))

@@ -1,0 +1,188 @@
+"""Kernel programs: sources with their includes inlined, built once per
+process, cached on disk across processes, built up front in parallel.
+
+Every ``#include "dir/file.h"`` is relative to the include root, the
+``gpu_core`` folder, and is inlined once; ``#line`` markers keep a build
+error pointing at the real file and line. Two files are generated rather
+than read: ``device/structs.h`` (the shared structs, device/layout.py) and
+``device/layout_probe.cl`` (the kernel that checks them). Every program is
+built with the shared constants (device/constants.py) as ``-D`` defines.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import pyopencl as cl
+
+from ..errors import DeviceError
+from . import constants, layout
+
+INCLUDE_ROOT = Path(__file__).resolve().parent.parent
+_INCLUDE_RE = re.compile(r'^[ \t]*#[ \t]*include[ \t]+"([^"]+)"[ \t]*$', re.MULTILINE)
+_GENERATED: dict[str, Callable[[], str]] = {
+    "device/structs.h": layout.structs_header,
+    "device/layout_probe.cl": layout.probe_source,
+}
+_OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
+_CACHE_FORMAT = "2"
+
+
+def kernel_cache_dir() -> Path:
+    """Folder of cached program binaries (``GPUGI_KERNEL_CACHE`` overrides it)."""
+    env = os.environ.get("GPUGI_KERNEL_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "gpugi" / "kernels"
+
+
+def _read(name: str) -> str:
+    if name in _GENERATED:
+        return _GENERATED[name]()
+    path = INCLUDE_ROOT / name
+    if not path.is_file():
+        raise DeviceError(f"kernel source {name!r} is missing from {INCLUDE_ROOT}")
+    return path.read_text()
+
+
+def load_source(name: str) -> str:
+    """Source of ``name`` (relative to the include root) with every include
+    inlined once, between ``#line`` markers naming the real files."""
+    seen: set[str] = set()
+
+    def expand(file_name: str) -> str:
+        seen.add(file_name)
+        text = _read(file_name)
+        out, last = [f'#line 1 "{file_name}"\n'], 0
+        for match in _INCLUDE_RE.finditer(text):
+            out.append(text[last:match.start()])
+            included = match.group(1)
+            if included not in seen:
+                resume = text.count("\n", 0, match.end()) + 2
+                out.append(expand(included) + f'\n#line {resume} "{file_name}"')
+            last = match.end()
+        out.append(text[last:])
+        return "".join(out)
+
+    return expand(name)
+
+
+def build_options(defines: dict | None = None) -> tuple[str, ...]:
+    """Compiler options: the standard, the shared constants, then ``defines``."""
+    merged = {**constants.defines(), **(defines or {})}
+    return _OPTIONS + tuple(f"-D{key}={value}" for key, value in sorted(merged.items()))
+
+
+@dataclass
+class BuildRecord:
+    """How one program was obtained: compiled now or loaded from the disk cache."""
+
+    name: str
+    from_cache: bool
+    milliseconds: float
+
+
+class Programs:
+    """The built programs of one device, each built once (thread-safe)."""
+
+    def __init__(self, context: cl.Context, device: cl.Device):
+        self.context = context
+        self.device = device
+        self.builds: list[BuildRecord] = []
+        self._programs: dict[tuple, cl.Program] = {}
+        self._pending: dict[tuple, threading.Event] = {}
+        self._lock = threading.Lock()
+
+    def get(self, name: str, defines: dict | None = None) -> cl.Program:
+        """The built program ``name`` with ``defines``; a second thread asking
+        while the first builds it waits for that build."""
+        key = (name, build_options(defines))
+        with self._lock:
+            if key in self._programs:
+                return self._programs[key]
+            waiting = self._pending.get(key)
+            if waiting is None:
+                self._pending[key] = threading.Event()
+        if waiting is not None:
+            waiting.wait()
+            with self._lock:
+                if key in self._programs:
+                    return self._programs[key]
+            return self.get(name, defines)  # the other build failed: raise its error here
+        try:
+            program = self._build(name, key[1])
+            with self._lock:
+                self._programs[key] = program
+        finally:
+            with self._lock:
+                self._pending.pop(key).set()
+        return program
+
+    def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None) -> None:
+        """Build every (name, defines) in ``wanted`` that is not built yet, in
+        parallel threads; ``progress(done, total)`` after each one."""
+        todo = list(dict.fromkeys((name, tuple(sorted((d or {}).items()))) for name, d in wanted))
+        todo = [(n, dict(d)) for n, d in todo if (n, build_options(dict(d))) not in self._programs]
+        if not todo:
+            return
+        done = 0
+        workers = max(1, min(len(todo), os.cpu_count() or 1))
+        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gpugi-build") as pool:
+            for future in [pool.submit(self.get, n, d) for n, d in todo]:
+                future.result()
+                done += 1
+                if progress is not None:
+                    progress(done, len(todo))
+
+    def _build(self, name: str, options: tuple[str, ...]) -> cl.Program:
+        start = time.perf_counter()
+        source = load_source(name)
+        dev = self.device
+        ident = "\n".join([_CACHE_FORMAT, source, " ".join(options), dev.platform.name, dev.platform.version,
+                           dev.name, dev.driver_version, cl.VERSION_TEXT, os.environ.get("POCL_WORK_GROUP_SPECIALIZATION", "")])
+        digest = hashlib.sha256(ident.encode()).hexdigest()
+        path = kernel_cache_dir() / f"{Path(name).stem}-{digest[:32]}.bin"
+        program = self._load_cached(path, options)
+        from_cache = program is not None
+        if program is None:
+            program = self._compile(name, source, options)
+            self._store_cached(path, program)
+        with self._lock:
+            self.builds.append(BuildRecord(name, from_cache, (time.perf_counter() - start) * 1e3))
+        return program
+
+    def _load_cached(self, path: Path, options) -> cl.Program | None:
+        try:
+            binary = path.read_bytes()
+        except OSError:
+            return None
+        try:
+            return cl.Program(self.context, [self.device], [binary]).build(options=list(options))
+        except (cl.Error, ValueError):
+            return None
+
+    def _compile(self, name: str, source: str, options) -> cl.Program:
+        try:
+            return cl.Program(self.context, source).build(options=list(options))
+        except cl.RuntimeError as err:
+            raise DeviceError(f"OpenCL program {name!r} failed to build on {self.device.name.strip()}:\n{err}") from err
+
+    @staticmethod
+    def _store_cached(path: Path, program: cl.Program) -> None:
+        try:
+            binary = program.get_info(cl.program_info.BINARIES)[0]
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
+            tmp.write_bytes(bytes(binary))
+            tmp.replace(path)
+        except (OSError, cl.Error):
+            pass  # a read-only cache only costs a recompile next time

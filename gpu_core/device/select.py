@@ -1,0 +1,110 @@
+"""Which OpenCL device renders: chosen by a spec string (argument, or the
+``GPUGI_DEVICE`` environment variable):
+
+* ``""`` or ``"cpu"``: the first CPU device (PoCL from PyPI, the default);
+* ``"gpu"``: the first GPU device of any platform;
+* ``"P"`` or ``"P:D"``: platform whose name contains ``P`` (case-insensitive)
+  or whose index is ``P``, and its device number ``D`` (default 0).
+
+When the asked-for device is missing, the CPU device is used and
+``Device.fallback_message`` says why, so the add-on can show it.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import pyopencl as cl
+
+from ..errors import DeviceError
+from .device import Device
+
+
+def _all_devices() -> list[tuple[int, cl.Platform, list[cl.Device]]]:
+    out = []
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return out
+    for index, platform in enumerate(platforms):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            devices = []
+        if devices:  # platforms without devices (e.g. rusticl with none) are skipped
+            out.append((index, platform, devices))
+    return out
+
+
+def list_devices() -> list[str]:
+    """``"P:D  platform / device"`` lines for every device, for UI and errors."""
+    return [
+        f"{index}:{number}  {platform.name.strip()} / {dev.name.strip()}"
+        for index, platform, devices in _all_devices()
+        for number, dev in enumerate(devices)
+    ]
+
+
+def _match(spec: str, found) -> cl.Device | None:
+    spec = spec.strip()
+    lowered = spec.lower()
+    if lowered in ("", "cpu", "gpu"):
+        wanted = cl.device_type.GPU if lowered == "gpu" else cl.device_type.CPU
+        for _, _, devices in found:
+            for dev in devices:
+                if dev.type & wanted:
+                    return dev
+        return None
+    platform_part, _, device_part = spec.partition(":")
+    try:
+        device_number = int(device_part) if device_part else 0
+    except ValueError:
+        return None
+    for index, platform, devices in found:
+        if platform_part.isdigit():
+            hit = int(platform_part) == index
+        else:
+            hit = platform_part.lower() in platform.name.lower()
+        if hit and 0 <= device_number < len(devices):
+            return devices[device_number]
+    return None
+
+
+_DEVICES: dict[str, Device] = {}
+_DEVICES_LOCK = threading.Lock()
+
+
+def get_device(spec: str | None = None) -> Device:
+    """The device for ``spec`` (or ``GPUGI_DEVICE``), created once per process."""
+    if spec is None:
+        spec = os.environ.get("GPUGI_DEVICE", "")
+    with _DEVICES_LOCK:
+        if spec not in _DEVICES:
+            _DEVICES[spec] = _create(spec)
+        return _DEVICES[spec]
+
+
+def _create(spec: str) -> Device:
+    found = _all_devices()
+    chosen = _match(spec, found)
+    message = ""
+    if chosen is None:
+        chosen = _match("cpu", found)
+        available = "; ".join(list_devices()) or "none"
+        if chosen is None:
+            raise DeviceError(
+                "No OpenCL device found. Install a GPU vendor's OpenCL driver, or the CPU device "
+                "(pip install pocl-binary-distribution; in Blender on Linux x64, the extension build "
+                f"that bundles it). Devices seen: {available}."
+            )
+        message = (
+            f"OpenCL device {spec!r} not found (devices: {available}); "
+            f"using {chosen.platform.name.strip()} / {chosen.name.strip()} instead."
+        )
+    try:
+        context = cl.Context([chosen])
+        queue = cl.CommandQueue(context)
+    except cl.Error as err:
+        raise DeviceError(f"Could not open OpenCL device {chosen.name.strip()}: {err}") from err
+    return Device(context=context, queue=queue, device=chosen, fallback_message=message)

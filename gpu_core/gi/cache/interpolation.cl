@@ -1,0 +1,175 @@
+/* Irradiance at shading points from the cache samples with Ward's weights
+ * w_j = 1 / (|x - x_j| / R_j + sqrt(2 - 2 n . n_j)) over the samples within
+ * a R_j of x that face the same way and are not in front of x [WZPB09, Ward
+ * 1988]. Candidates come from a hash grid with one level per power-of-two
+ * radius: a sample sits in the one cell of the level whose cells are at
+ * least its radius across, so a query visits the 27 cells around it on each
+ * level in use. Points no sample covers take the nearest sample with a
+ * compatible normal, else the nearest one (gpu_core/gi/cache/interpolation.py). */
+#include "gi/cache/cache.h"
+
+/* Cell sizes 2, 1, 1/2, ... 2^-16 (normalised units): the finest cells stay
+ * far wider than float rounding of the coordinates. */
+#define CACHE_LEVELS 18
+#define CACHE_MIN_COS 0.01f /* samples with n . n_j at or below this are rejected */
+
+/* Level of a sample of coverage radius r <= 2: the finest one whose cells
+ * (2^(1-g) across) are still at least r. */
+inline int Cache_level(float r) {
+    float f = floor(log2(2.0f / fmax(r, 1e-30f)));
+    int g = (int)clamp(f, 0.0f, (float)(CACHE_LEVELS - 1));
+    while (g > 0 && ldexp(2.0f, -g) < r) g--;
+    return g;
+}
+
+/* Cell of x on level g (x inside the normalised box, so every index is >= 0). */
+inline int4 Cache_level_cell(float3 x, int g) {
+    float3 f = floor((x + 1.0f) / ldexp(2.0f, -g));
+    return (int4)(convert_int3(f), g);
+}
+
+/* Hash-table slot of a cell. */
+inline uint Cache_bucket(int4 cell, uint mask) {
+    uint h = (uint)cell.x * 73856093U ^ (uint)cell.y * 19349663U ^ (uint)cell.z * 83492791U;
+    return Rng_hash(h ^ (uint)cell.w * 2654435761U) & mask;
+}
+
+/* Samples into the cache's frame: position (p - centre) / extent with w the
+ * coverage radius a R_j, and R_j / extent, bounded (a zero, negative or NaN
+ * R_j takes the smallest radius, an infinite one the largest). */
+__kernel void Cache_prepare_samples(const __global float4 *spos, const __global float *srad, const int m,
+                                    const float4 centre_high, const float4 centre_low, const float extent,
+                                    const float a, __global float4 *out_pos, __global float *out_rad) {
+    int j = get_global_id(0);
+    if (j >= m) return;
+    float r = srad[j] / extent;
+    r = isnan(r) ? CACHE_MIN_R : clamp(r, CACHE_MIN_R, CACHE_MAX_R);
+    float3 d = (spos[j].xyz - centre_high.xyz) - centre_low.xyz;
+    out_pos[j] = (float4)(d / extent, fmin(a * r, CACHE_MAX_COVER));
+    out_rad[j] = r;
+}
+
+/* Each sample's level cell, its hash slot, and the set of levels in use. */
+__kernel void Cache_sample_cells(const __global float4 *spos, const int m, const uint mask,
+                                 __global int4 *cells, __global uint *keys,
+                                 volatile __global uint *levels) {
+    int j = get_global_id(0);
+    if (j >= m) return;
+    int4 cell = Cache_level_cell(spos[j].xyz, Cache_level(spos[j].w));
+    cells[j] = cell;
+    keys[j] = Cache_bucket(cell, mask);
+    atomic_or(levels, 1U << cell.w);
+}
+
+/* The hash grid of coverage spheres and the samples it holds. */
+#define CACHE_HASH_PARAMS                                                    \
+    const __global float4 *spos, const __global float4 *snrm, const __global float4 *sirr,          \
+        const __global float *srad, const __global int4 *cells, const __global int *bucket_start, \
+        const __global int *bucket_end, const __global int *bucket_items, const uint mask, const uint levels
+
+/* Ward's weighted mean over the samples covering x (normal nx) that face
+ * its way and do not lie in front of it; the summed weight goes to *wsum
+ * (0 when none covers it). A running mean cannot overflow, and samples of
+ * equal irradiance leave it exactly at that value. */
+inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float behind, float *wsum) {
+    float3 mean = (float3)(0.0f);
+    *wsum = 0.0f;
+    for (int g = 0; g < CACHE_LEVELS; ++g) {
+        if (!((levels >> g) & 1U)) continue;
+        int4 home = Cache_level_cell(x, g);
+        for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            int4 cell = home + (int4)(dx, dy, dz, 0);
+            uint b = Cache_bucket(cell, mask);
+            for (int k = bucket_start[b]; k < bucket_end[b]; ++k) {
+                int j = bucket_items[k];
+                int4 cj = cells[j];
+                if (cj.x != cell.x || cj.y != cell.y || cj.z != cell.z || cj.w != g) continue;
+                float3 d = x - spos[j].xyz;
+                float dist = sqrt(dot(d, d));
+                float3 nj = snrm[j].xyz;
+                float cosn = dot(nx, nj);
+                float rj = srad[j];
+                if (dist >= spos[j].w || cosn <= CACHE_MIN_COS || dot(d, nx + nj) < -behind * rj) continue;
+                float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
+                *wsum += w;
+                mean += (w / *wsum) * (sirr[j].xyz - mean);
+            }
+        }
+    }
+    return mean;
+}
+
+/* The sample nearest x with a compatible normal, else the nearest one
+ * (ties within the window: lower index), in two passes as Cache_assign;
+ * -1 when there are no samples. *compatible says which it is. */
+inline int Cache_nearest_sample(const __global float4 *spos, const __global float4 *snrm, CACHE_GRID_PARAMS,
+                                const int m, float3 x, float3 nx, bool *compatible) {
+    float d_ok = FLT_MAX, d_any = FLT_MAX;
+    int3 c = Cache_grid_cell(x, grid_origin, grid_dims);
+    int rings = m > 0 ? Cache_ring_count(c, grid_dims) : 0;
+    int used = rings;
+    for (int r = 0; r < rings; ++r) {
+        CacheRing ring;
+        CacheRing_begin(&ring, c, r, grid_dims);
+        int cell;
+        while ((cell = CacheRing_next(&ring, grid_dims)) >= 0) {
+            for (int k = grid_start[cell]; k < grid_end[cell]; ++k) {
+                int j = grid_items[k];
+                float3 d = x - spos[j].xyz;
+                float dist = sqrt(dot(d, d));
+                d_any = fmin(d_any, dist);
+                if (dot(nx, snrm[j].xyz) > CACHE_MIN_COS) d_ok = fmin(d_ok, dist);
+            }
+        }
+        float bound = Cache_ring_bound(x, c, r, grid_origin, grid_dims);
+        if (bound == FLT_MAX || (d_ok < FLT_MAX && bound * (1.0f - 1e-5f) > Cache_tie_window(d_ok))) {
+            used = r + 1;
+            break;
+        }
+    }
+    *compatible = d_ok < FLT_MAX;
+    float window = Cache_tie_window(*compatible ? d_ok : d_any);
+    int best_ok = INT_MAX, best_any = INT_MAX;
+    for (int r = 0; r < used; ++r) {
+        CacheRing ring;
+        CacheRing_begin(&ring, c, r, grid_dims);
+        int cell;
+        while ((cell = CacheRing_next(&ring, grid_dims)) >= 0) {
+            for (int k = grid_start[cell]; k < grid_end[cell]; ++k) {
+                int j = grid_items[k];
+                float3 d = x - spos[j].xyz;
+                if (sqrt(dot(d, d)) > window) continue;
+                best_any = min(best_any, j);
+                if (dot(nx, snrm[j].xyz) > CACHE_MIN_COS) best_ok = min(best_ok, j);
+            }
+        }
+    }
+    int pick = *compatible ? best_ok : best_any;
+    return pick == INT_MAX ? -1 : pick;
+}
+
+/* Interpolated irradiance at each point. flag: 1 covered, 2 nearest
+ * compatible sample, 3 nearest sample, 0 no samples at all.
+ * spos: xyz, w = coverage radius a R_j; srad: R_j (both normalised). */
+__kernel void Cache_interpolate(const __global float4 *pos, const __global float4 *nrm, const int n,
+                                CACHE_HASH_PARAMS, CACHE_GRID_PARAMS, const int m, const float behind,
+                                __global float4 *out, __global int *flag) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float3 x = pos[i].xyz, nx = nrm[i].xyz;
+    float wsum;
+    float3 mean = Cache_covering_mean(spos, snrm, sirr, srad, cells, bucket_start, bucket_end, bucket_items, mask,
+                                      levels, x, nx, behind, &wsum);
+    if (wsum > 0.0f) {
+        out[i] = (float4)(mean, 0.0f);
+        flag[i] = 1;
+        return;
+    }
+    bool compatible;
+    int pick = Cache_nearest_sample(spos, snrm, grid_origin, grid_dims, grid_start, grid_end, grid_items, m, x, nx,
+                                    &compatible);
+    out[i] = pick >= 0 ? (float4)(sirr[pick].xyz, 0.0f) : (float4)(0.0f);
+    flag[i] = pick < 0 ? 0 : (compatible ? 2 : 3);
+}

@@ -1,0 +1,114 @@
+"""Interpolation of cached irradiance to shading points (interpolation.cl).
+
+    E(x) = sum_j w_j E_j / sum_j w_j,  w_j = 1 / (|x - x_j| / R_j + sqrt(2 - 2 n . n_j))
+
+over the samples j with |x - x_j| < a R_j, n . n_j > 0.01 and x not behind
+them, (x - x_j) . (n + n_j) >= -behind R_j. A point no sample covers takes
+the irradiance of the nearest sample with n . n_j > 0.01, else of the
+nearest sample, so no point is left without a value. Samples and points
+are read from the device, in the cache's normalised frame (frame.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+from pyopencl import cltypes
+
+from ...device import Device, primitives
+from ...device.layout import finite_rows, float4_rows
+from ...device.timer import StageTimer
+from . import grid as cache_grid
+from .frame import Frame
+
+_PROGRAM = "gi/cache/interpolation.cl"
+COVER = 0.5  # default a: a sample covers points within a R_j
+BEHIND = 0.02  # default tolerance of the in-front test, in units of R_j
+_MIN_R = 1e-6  # R_j bounds, in units of the largest side of the box of
+_MAX_R = 1e6  # samples and points (zero, negative or NaN R_j -> the minimum)
+_MAX_COVER = 2.0  # a coverage radius this large already spans the whole box
+
+
+def _k(device: Device, name: str):
+    return device.kernel(_PROGRAM, name, {"CACHE_MIN_R": f"{_MIN_R!r}f", "CACHE_MAX_R": f"{_MAX_R!r}f",
+                                          "CACHE_MAX_COVER": f"{_MAX_COVER!r}f"})
+
+
+def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr: cl.Buffer, srad: cl.Buffer,
+                          m: int, pos: cl.Buffer, nrm: cl.Buffer, n: int, a: float = COVER,
+                          behind: float = BEHIND) -> tuple[cl.Buffer, dict]:
+    """Irradiance (float4 per point, on the device) at the ``n`` points
+    ``pos`` (float4) with unit normals ``nrm`` from the ``m`` samples
+    (float4 positions, unit normals and irradiance, float harmonic-mean
+    distances R_j), and stats: ``covered`` (fraction of points with at
+    least one accepted sample), ``fallback`` (points given their nearest
+    sample's value), ``fallback_any_normal`` (of those, points with no
+    sample facing their way), ``ms``."""
+    if not (np.isfinite(a) and a > 0.0 and np.isfinite(behind) and behind >= 0.0):
+        raise ValueError(f"a must be > 0 and behind >= 0 (finite), not {a}, {behind}")
+    timer = StageTimer(device.queue)
+    stats = {"points": n, "samples": m, "ms": timer.ms}
+    out = device.zeros(16 * n)
+    if n == 0 or m == 0:
+        stats.update(covered=0.0, fallback=0, fallback_any_normal=0)
+        return out, stats
+    with timer.stage("build"):
+        frame = Frame.on_device(device, (spos, m), (pos, n))
+        high = frame.centre.astype(np.float32)
+        low = (frame.centre - high).astype(np.float32)
+        # samples in the frame, w = coverage radius a R_j; R_j in frame units
+        d_spos, d_srad = device.empty(16 * m), device.empty(4 * m)
+        _k(device, "Cache_prepare_samples")(
+            m, spos, srad, np.int32(m), np.append(high, 0).astype(np.float32), np.append(low, 0).astype(np.float32),
+            np.float32(frame.extent), np.float32(a), d_spos, d_srad)
+        d_pos = frame.normalise(device, pos, n)
+        # hash grid of coverage spheres, one level per power-of-two radius
+        table = 1 << max(2 * m - 1, 1).bit_length()
+        cells, keys, levels = device.empty(16 * m), device.empty(4 * m), device.zeros(4)
+        _k(device, "Cache_sample_cells")(m, d_spos, np.int32(m), np.uint32(table - 1), cells, keys, levels)
+        buckets = primitives.group(device, keys, m, table)
+        level_bits = device.scalar(levels, np.uint32)
+        # uniform grid of sample positions for the nearest-sample fallback
+        lo, hi = primitives.bounds(device, d_spos, m)
+        grid = cache_grid.build(device, d_spos, m, lo[:3], hi[:3], m)
+    with timer.stage("interpolate"):
+        flag = device.empty(4 * n)
+        _k(device, "Cache_interpolate")(
+            n, d_pos, nrm, np.int32(n), d_spos, snrm, sirr, d_srad, cells, buckets.start, buckets.end, buckets.order,
+            np.uint32(table - 1), np.uint32(level_bits), *grid.kernel_args(), np.int32(m), np.float32(behind), out,
+            flag)
+        kinds = _flag_counts(device, flag, n)
+    stats.update(covered=float(kinds[1]) / n, fallback=int(kinds[2] + kinds[3]), fallback_any_normal=int(kinds[3]))
+    stats["ms"]["total"] = timer.ms["build"] + timer.ms["interpolate"]
+    return out, stats
+
+
+def _flag_counts(device: Device, flag: cl.Buffer, n: int) -> np.ndarray:
+    """How many points have each flag 0..3, counted on the device."""
+    count = primitives.reduction_kernel(
+        device, cltypes.int4, "(int4)(0)", "a + b", "(int4)(f[i] == 0, f[i] == 1, f[i] == 2, f[i] == 3)",
+        "__global const int *f")
+    result = count(device.view(flag, n, np.int32), range=slice(n), queue=device.queue)
+    return np.frombuffer(device.get(result).tobytes(), np.int32).copy()
+
+
+def interpolate(device: Device, samples_pos, samples_n, samples_E, samples_R, points, normals,
+                a: float = COVER, behind: float = BEHIND):
+    """``interpolate_on_device`` on host arrays: samples (positions (M, 3),
+    unit normals (M, 3), irradiance (M, 3), harmonic-mean distances (M,)),
+    points (N, 3) with unit normals; returns irradiance (N, 3) and stats."""
+    spos = finite_rows("samples_pos", samples_pos, 3, np.float32)
+    snrm = finite_rows("samples_n", samples_n, 3, np.float32)
+    sirr = finite_rows("samples_E", samples_E, 3, np.float32)
+    srad = np.asarray(samples_R, np.float32).reshape(-1)
+    pts = finite_rows("points", points, 3, np.float32)
+    nrm = finite_rows("normals", normals, 3, np.float32)
+    m, n = len(spos), len(pts)
+    if not (len(snrm) == len(sirr) == len(srad) == m):
+        raise ValueError("samples_pos, samples_n, samples_E and samples_R differ in length")
+    if len(nrm) != n:
+        raise ValueError("points and normals differ in length")
+    up = device.to_device
+    out, stats = interpolate_on_device(device, up(float4_rows(spos)), up(float4_rows(snrm)), up(float4_rows(sirr)),
+                                       up(srad), m, up(float4_rows(pts)), up(float4_rows(nrm)), n, a, behind)
+    return device.read_xyz(out, n), stats

@@ -1,0 +1,211 @@
+"""Illumination cut of the global photon tree [WZPB09] (cut.cl), selected
+on the device, and the irradiance it gives at any surface point (what final
+gathering reads at its hits, cut_lookup.h).
+
+A cut holds exactly one node on every root-to-leaf path of the photon
+kd-tree (empty leaves, which carry no light, are left out of the result).
+Every node carries an approximate irradiance E~_p (summed power of
+front-facing photons over the squared node size, computed by the tree
+build). ``select``:
+
+1. E_min is the mean E~_p (luminance, zeros left out) over tree levels
+   12-13, or the two deepest levels of a shallower tree;
+2. the coarse cut is, on each path, the first node with E~_p >= E_min, and
+   the leaf where there is none;
+3. refinement: each cut node's exact irradiance E_p at its centre comes
+   from k-nearest-photon density estimation; where |E~_p - E_p| > delta E_p
+   the node is replaced by its children, for a few rounds.
+
+A node's centre is the mean position of its photons (on the surface they
+lie on, where the box centre may float in the air), and a node whose
+photons lie on surfaces facing different ways (a box corner) never joins
+the cut while it has children: one normal and one irradiance cannot stand
+for both walls, and the estimate at such a node misses most of the light.
+The host reads back only a few counts and sums.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+from pyopencl import cltypes
+
+from ..accel.point_tree import PointTree
+from ..device import Device, load_source, primitives
+from ..device.constants import KD_LEAF as LEAF
+from ..device.layout import KDNODE_DTYPE, POINT_NODE_DTYPE, float4_rows
+
+DELTA = 0.2  # default refinement threshold, relative to E_p
+MAX_ROUNDS = 6  # default refinement rounds
+LEVELS = (12, 13)  # tree levels whose mean E~_p is E_min
+NEIGHBOURS = 16  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS)
+COHERENT = 0.9  # |mean photon normal| below this: the node spans several surfaces (cut.cl CUT_COHERENT)
+_PROGRAM = "gi/cut.cl"
+
+
+def lookup_defines(k: int) -> dict:
+    """Defines of a program that estimates with ``k`` photons and looks the
+    cut up: the kNN capacity and the lookup's constants."""
+    return {"KNN_K": max(int(k), NEIGHBOURS), "KNN_VARIABLE_K": 1, "CUT_NEIGHBOURS": NEIGHBOURS,
+            "CUT_COHERENT": f"{COHERENT!r}f"}
+
+
+def programs(k: int) -> list[tuple[str, dict]]:
+    """The programs the cut builds for estimates of ``k`` photons."""
+    return [(_PROGRAM, lookup_defines(k))]
+
+
+@dataclass
+class Cut:
+    """The chosen nodes on the device: per node its centre (w = size L_j),
+    unit normal (zero when unknown) and exact irradiance E_p, and a point
+    tree over the centres for lookups."""
+
+    device: Device
+    ids: cl.Buffer  # int (K,): preorder indices in the photon tree
+    centre: cl.Buffer  # float4 (K,)
+    normal: cl.Buffer  # float4 (K,)
+    irradiance: cl.Buffer  # float4 (K,)
+    count: int
+    lookup: PointTree | None
+    k: int  # photons per estimate (sets the programs' kNN capacity)
+    stats: dict = field(default_factory=dict)
+
+    def kernel_args(self) -> list:
+        """Arguments matching CUT_PARAMS in cut_lookup.h, in order."""
+        tree = self.lookup.kernel_args() if self.lookup is not None else [None, None]
+        return [*tree, self.centre, self.normal, self.irradiance, np.int32(self.count)]
+
+    @classmethod
+    def from_nodes(cls, device: Device, centres, normals, sizes, irradiance, k: int = 50) -> "Cut":
+        """A cut of given nodes (host arrays: centres (K, 3), unit normals
+        (K, 3), sizes L_j (K,), irradiance (K, 3))."""
+        centre = float4_rows(centres)
+        centre[:, 3] = np.asarray(sizes, np.float32)
+        count = len(centre)
+        centre_buf = device.to_device(centre)
+        lookup = PointTree.from_device(device, primitives.indexed_points(device, centre_buf, count)) if count else None
+        return cls(device, device.to_device(np.arange(count, dtype=np.int32)), centre_buf,
+                   device.to_device(float4_rows(normals)), device.to_device(float4_rows(irradiance)), count, lookup, k)
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """(K,) preorder node indices, read back (tests and statistics)."""
+        return self.device.read(self.ids, self.count, np.int32).astype(np.int64)
+
+    def irradiance_at(self, points, normals) -> np.ndarray:
+        """Irradiance (N, 3) at host points with unit ``normals``, looked up on the device."""
+        pts, nrm = float4_rows(points), float4_rows(normals)
+        n, dev = len(pts), self.device
+        out = dev.zeros(16 * n)
+        if self.count:
+            dev.kernel(_PROGRAM, "Cut_lookup", lookup_defines(self.k))(
+                n, *self.kernel_args(), dev.to_device(pts), dev.to_device(nrm), np.int32(n), out)
+        return dev.read_xyz(out, n)
+
+
+def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_rounds: int = MAX_ROUNDS) -> Cut:
+    """The illumination cut of photon tree ``tree`` (built with photon
+    attributes), exact irradiance by ``k``-nearest-photon estimates."""
+    n = tree.node_count
+    if n == 0 or tree.point_count == 0:
+        stats = dict(tree_nodes=n, cut_nodes=0, e_min=0.0, refined=0, rounds=0)
+        return Cut(device, device.empty(4), device.empty(16), device.empty(16), device.empty(16), 0, None, k, stats)
+    kern = _Kernels(device, k)
+    nodes, info = tree.kernel_args()[0], tree.node_buffer
+    e_min, levels = _e_min(device, info, n)
+    parent = device.empty(4 * n)
+    device.fill(parent, -1, 4 * n)
+    kern("Cut_parents")(n, nodes, np.int32(n), parent)
+    in_cut, exact = device.empty(4 * n), device.empty(16 * n)
+    kern("Cut_coarse")(n, nodes, info, parent, np.int32(n), np.float32(e_min), in_cut, exact)
+    coarse = _count(device, in_cut, n)
+    # refinement by exact estimates at the node centres
+    refined, rounds, counter = 0, 0, device.empty(4)
+    for rounds in range(1, max_rounds + 1):
+        kern("Cut_exact")(n, *tree.kernel_args(), *tree.photon_args(), info, in_cut, np.int32(n), np.int32(k), exact)
+        device.fill(counter, 0, 4)
+        kern("Cut_split")(n, nodes, info, exact, np.int32(n), np.float32(delta), in_cut, counter)
+        split = int(device.scalar(counter))
+        refined += split
+        if not split:
+            break
+    kern("Cut_exact")(n, *tree.kernel_args(), *tree.photon_args(), info, in_cut, np.int32(n), np.int32(k), exact)
+    # the cut without its empty leaves, in preorder
+    ids, count = _compact(device, in_cut, info, n)
+    centre, normal, irradiance = device.empty(16 * count), device.empty(16 * count), device.empty(16 * count)
+    kern("Cut_emit")(count, info, exact, ids, np.int32(count), centre, normal, irradiance)
+    lookup = PointTree.from_device(device, primitives.indexed_points(device, centre, count)) if count else None
+    leaves, mixed = _leaves_and_mixed(device, nodes, info, in_cut, n)
+    stats = dict(tree_nodes=n, cut_nodes=count, coarse_nodes=coarse, e_min=float(e_min), e_min_levels=list(levels),
+                 refined=refined, rounds=rounds, leaves_in_cut=leaves, mixed_nodes=mixed)
+    return Cut(device, ids, centre, normal, irradiance, count, lookup, k, stats)
+
+
+class _Kernels:
+    def __init__(self, device: Device, k: int):
+        self.device, self.defines = device, lookup_defines(k)
+
+    def __call__(self, name: str):
+        return self.device.kernel(_PROGRAM, name, self.defines)
+
+
+_LUMINANCE = "Sampling_luminance(info[i].irradiance.xyz)"
+# double-float sums: (sum, error) pairs added without losing the error
+_TWO_SUM = """
+float4 Cut_two_sum(float4 a, float4 b) {
+    float s = a.x + b.x, bp = s - a.x;
+    float err = (a.x - (s - bp)) + (b.x - bp);
+    return (float4)(s, a.y + b.y + err, a.z + b.z, 0.0f);
+}
+"""
+
+
+def _e_min(device: Device, info: cl.Buffer, n: int) -> tuple[float, tuple[int, ...]]:
+    """Mean non-zero E~_p over levels 12-13, or the two deepest levels;
+    summed on the device to float64 accuracy."""
+    view = device.view(info, n, POINT_NODE_DTYPE)
+    depth = primitives.reduction_kernel(device, np.int32, "0", "max(a, b)", "info[i].depth",
+                                        "__global const PointNode *info")
+    deepest = int(device.get(depth(view, range=slice(n), queue=device.queue)))
+    levels = LEVELS if deepest >= LEVELS[-1] else tuple(range(max(deepest - 1, 0), deepest + 1))
+    on = f"((info[i].depth == {levels[0]} || info[i].depth == {levels[-1]}) && {_LUMINANCE} > 0.0f)"
+    total = primitives.reduction_kernel(
+        device, cltypes.float4, "(float4)(0.0f)", "Cut_two_sum(a, b)",
+        f"({on} ? (float4)({_LUMINANCE}, 0.0f, 1.0f, 0.0f) : (float4)(0.0f))", "__global const PointNode *info",
+        preamble=load_source("device/sampling.h") + _TWO_SUM)
+    s, err, count, _ = np.frombuffer(device.get(total(view, range=slice(n), queue=device.queue)).tobytes(), np.float32)
+    return (float(np.float64(s) + np.float64(err)) / float(count) if count > 0 else 0.0), levels
+
+
+def _count(device: Device, flags: cl.Buffer, n: int) -> int:
+    """How many of ``n`` int flags are set."""
+    kernel = primitives.reduction_kernel(device, np.int32, "0", "a + b", "f[i] != 0", "__global const int *f")
+    return int(device.get(kernel(device.view(flags, n, np.int32), range=slice(n), queue=device.queue)))
+
+
+def _compact(device: Device, in_cut: cl.Buffer, info: cl.Buffer, n: int) -> tuple[cl.Buffer, int]:
+    """Preorder ids of the cut nodes that hold photons, in order."""
+    kernel = primitives.scan_kernel(
+        device, np.int32, "__global const int *in_cut, __global const PointNode *info, __global int *ids, "
+        "__global int *total", "in_cut[i] != 0 && info[i].count > 0 ? 1 : 0",
+        "if (prev_item != item) ids[item - 1] = i; if (i + 1 == N) *total = item;")
+    ids, total = device.empty(4 * n), device.empty(4)
+    kernel(device.view(in_cut, n, np.int32), device.view(info, n, POINT_NODE_DTYPE), device.view(ids, n, np.int32),
+           device.view(total, 1, np.int32), size=n, queue=device.queue)
+    return ids, int(device.scalar(total))
+
+
+def _leaves_and_mixed(device: Device, nodes: cl.Buffer, info: cl.Buffer, in_cut: cl.Buffer, n: int) -> tuple[int, int]:
+    """Leaves among the (non-empty) cut nodes, and mixed nodes in the tree."""
+    kernel = primitives.reduction_kernel(
+        device, cltypes.int2, "(int2)(0)", "a + b",
+        f"(int2)(in_cut[i] != 0 && info[i].count > 0 && nodes[i].axis == {LEAF}, "
+        f"nodes[i].axis != {LEAF} && info[i].normal.w < {COHERENT!r}f)",
+        "__global const KdNode *nodes, __global const PointNode *info, __global const int *in_cut")
+    got = kernel(device.view(nodes, n, KDNODE_DTYPE), device.view(info, n, POINT_NODE_DTYPE),
+                 device.view(in_cut, n, np.int32), range=slice(n), queue=device.queue)
+    leaves, mixed = np.frombuffer(device.get(got).tobytes(), np.int32)
+    return int(leaves), int(mixed)

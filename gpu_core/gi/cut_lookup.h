@@ -1,0 +1,55 @@
+/* Irradiance from the illumination cut at a surface point [WZPB09]: the
+ * cut nodes j around y, weighted w_j = K(|p_j - y| / L_j) max(0, n_j . n_y)
+ * with K(x) = 1 - x^2 (0 past x = 1) and L_j the node's size; a point no
+ * node covers takes the nearest node facing its way, so gathering never
+ * meets holes. Used by final gathering (gather.cl) and the batch lookup
+ * (cut.cl). The nodes are found by kNN in a point tree over their centres
+ * (KNN_K at least CUT_NEIGHBOURS). */
+#ifndef GPUGI_CUT_LOOKUP_H
+#define GPUGI_CUT_LOOKUP_H
+#include "accel/point_tree_knn.h"
+
+/* CUT_NEIGHBOURS (cut nodes considered around a lookup point) comes from
+ * the host (gpu_core/gi/cut.py lookup_defines). */
+
+/* The cut: a point tree over its node centres (cut_nodes, cut_points), and
+ * per node (in the tree's original order) the centre with L_j in w, the
+ * unit normal and the irradiance E_p. */
+#define CUT_PARAMS                                                           \
+    POINT_TREE_PARAMS_OF(cut), const __global float4 *cut_centre,           \
+        const __global float4 *cut_normal, const __global float4 *cut_irradiance, const int cut_count
+
+typedef struct {
+    PointTree tree;
+    const __global float4 *centre;
+    const __global float4 *normal;
+    const __global float4 *irradiance;
+    int count;
+} Cut;
+
+#define CUT_MAKE() ((Cut){POINT_TREE_OF(cut), cut_centre, cut_normal, cut_irradiance, cut_count})
+
+inline float3 CutLookup_irradiance(const Cut *cut, float3 y, float3 n_y) {
+    float3 none = (float3)(0.0f);
+    if (cut->count <= 0) return none;
+    Knn h;
+    PointTree_knn(&cut->tree, y, min(CUT_NEIGHBOURS, cut->count), INFINITY, &h);
+    Knn_sort(&h);
+    float3 sum = none;
+    float total = 0.0f;
+    int nearest_facing = -1;
+    for (int i = 0; i < Knn_count(&h); ++i) {
+        int j = as_int(cut->tree.points[Knn_id(&h, i)].w);
+        float facing = dot(cut->normal[j].xyz, n_y);
+        if (facing > 0.0f && nearest_facing < 0) nearest_facing = j;
+        float size = fmax(cut->centre[j].w, 1e-30f);
+        float x2 = Knn_d2(&h, i) / (size * size);
+        float w = fmax(1.0f - x2, 0.0f) * fmax(facing, 0.0f);
+        total += w;
+        sum += w * cut->irradiance[j].xyz;
+    }
+    if (total > 0.0f) return sum / total;
+    return nearest_facing >= 0 ? cut->irradiance[nearest_facing].xyz : none;
+}
+
+#endif

@@ -1,0 +1,78 @@
+/* Shading points for the irradiance cache [WZPB09]: camera rays through a
+ * grid of sub-pixel positions (so pixels on an edge see both surfaces),
+ * followed through mirrors and glass (the likelier of reflection and
+ * refraction) to the first surface with a diffuse lobe. */
+#include "device/sampling.h"
+#include "shading/camera.h"
+#include "shading/surface.h"
+
+#define SHADING_POINTS_MAX_PASSTHROUGH 64
+/* Points step back along the ray by this fraction of the scene's size: a
+ * point on the edge where two walls meet then lies off both, and its gather
+ * rays hit the other wall instead of slipping out past it. */
+#define SHADING_POINTS_PULL_BACK 1e-5f
+
+/* Per grid slot (sub-pixel s of pixel p of the window is slot p * sub^2 +
+ * s, sub positions row by row): position (w = 1 where a diffuse surface was
+ * found, else 0) and shading normal facing the camera path. window = (x0,
+ * y0, x1, y1) of the full image. */
+__kernel void ShadingPoints_trace(SCENE_PARAMS, const int4 window, const int sub, const int max_bounces,
+                                  __global float4 *out_pos, __global float4 *out_nrm) {
+    int g = get_global_id(0);
+    int w = window.z - window.x, h = window.w - window.y;
+    if (g >= w * h * sub * sub) return;
+    int pixel = g / (sub * sub), s = g % (sub * sub);
+    SceneView sc = SCENE_MAKE();
+    Camera cam = *sc.camera;
+    float3 org, dir;
+    float tmin, tmax;
+    Camera_ray(&cam, window.x + pixel % w + (s % sub + 0.5f) / sub, window.y + pixel / w + (s / sub + 0.5f) / sub,
+               &org, &dir, &tmin, &tmax);
+    float pull_back = SHADING_POINTS_PULL_BACK * length(sc.tree.bmax - sc.tree.bmin);
+    out_pos[g] = (float4)(0.0f);
+    out_nrm[g] = (float4)(0.0f);
+    int bounces = 0, passes = 0;
+    while (true) {
+        Hit hit;
+        if (!KdTree_intersect(&sc.tree, org, dir, tmin, tmax, &hit)) return;
+        SurfacePoint sp = Surface_at(&sc, dir, &hit);
+        Material m = sc.materials[sp.material];
+        /* mostly see-through surfaces are passed, as most camera samples do */
+        if (m.base_color.w < 0.5f && passes < SHADING_POINTS_MAX_PASSTHROUGH) {
+            passes++;
+            org = sp.p - sp.eps * sp.ng;
+            tmin = 0.0f;
+            tmax = RAY_FAR;
+            continue;
+        }
+        float diffuse = Surface_diffuse_weight(&m);
+        if (diffuse > 0.0f || bounces >= max_bounces) {
+            out_pos[g] = (float4)(sp.p - pull_back * dir, diffuse > 0.0f ? 1.0f : 0.0f);
+            out_nrm[g] = (float4)(sp.ns, 0.0f);
+            return;
+        }
+        /* a purely specular surface: follow its likelier direction */
+        bool glass = m.metallic < 0.5f && m.transmission > 0.0f;
+        float u = 0.0f;
+        if (glass) {
+            float cos_t, eta = dot(sp.ng_raw, sp.ng) > 0.0f ? 1.0f / m.ior : m.ior;
+            u = Bsdf_fresnel(fabs(dot(dir, sp.ns)), eta, &cos_t) < 0.5f ? 1.0f : 0.0f;
+        }
+        bool refracted;
+        Surface_specular(&sp, &m, glass ? BSDF_GLASS : BSDF_MIRROR, (float3)(1.0f), u, &dir, &org, &refracted);
+        tmin = 0.0f;
+        tmax = RAY_FAR;
+        bounces++;
+    }
+}
+
+/* The value of each compacted point into its grid slot, non-finite parts
+ * as 0 (the other slots stay as they were: zero). */
+__kernel void ShadingPoints_scatter(const __global float4 *values, const __global int *slots, const int n,
+                                    __global float4 *grid) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float4 v = values[i];
+    grid[slots[i]] = (float4)(isfinite(v.x) ? v.x : 0.0f, isfinite(v.y) ? v.y : 0.0f, isfinite(v.z) ? v.z : 0.0f,
+                              isfinite(v.w) ? v.w : 0.0f);
+}

@@ -1,0 +1,94 @@
+"""Shading points of the irradiance cache (shading_points.cl).
+
+Camera rays through a grid of ``subpixels`` x ``subpixels`` positions in
+each pixel, followed through mirrors and glass to the first surface with a
+diffuse lobe. The grid stays on the device (the image kernel reads the GI
+cache through it), and the slots that found a surface are compacted on the
+device into the list of points the cache works on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+from pyopencl import cltypes
+
+from ..device import Device, primitives
+from ..scene.upload import SceneBuffers
+from .points import DevicePoints
+
+_PROGRAM = "gi/shading_points.cl"
+
+
+def programs(scene_defines: dict) -> list[tuple[str, dict]]:
+    """The programs this stage builds."""
+    return [(_PROGRAM, scene_defines)]
+
+
+@dataclass
+class ShadingPoints(DevicePoints):
+    """First diffuse hits of the camera rays of a render window, on the device."""
+
+    device: Device
+    grid_pos: cl.Buffer  # float4 per grid slot: xyz, w = 1 where a surface was found
+    grid_nrm: cl.Buffer  # float4 per grid slot
+    pos: cl.Buffer  # float4 per point (the slots with a surface, in slot order)
+    nrm: cl.Buffer  # float4 per point, unit, facing the camera path
+    pixel: cl.Buffer  # int2 per point: (x, y) in the window, rows from the bottom
+    slot: cl.Buffer  # int per point: its grid slot, pixel * subpixels^2 + sub-position
+    count: int
+    width: int
+    height: int
+    subpixels: int  # points per pixel side: up to subpixels^2 points per pixel
+
+    @property
+    def grid_size(self) -> int:
+        """Slots of the whole grid, points or not."""
+        return self.width * self.height * self.subpixels**2
+
+    def scatter(self, values: cl.Buffer) -> cl.Buffer:
+        """A grid of float4 holding each point's value (``values``, float4 per
+        point) in its slot and zero elsewhere."""
+        grid = self.device.zeros(16 * self.grid_size)
+        self.device.kernel(_PROGRAM, "ShadingPoints_scatter")(self.count, values, self.slot, np.int32(self.count), grid)
+        return grid
+
+
+def trace(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, int], max_bounces: int,
+          subpixels: int = 2, scene_defines: dict | None = None) -> ShadingPoints:
+    """Shading points of the pixels in ``window`` = (x0, y0, x1, y1) of the
+    full image; rays that reach no diffuse surface (the world, a light) give
+    no point. ``scene_defines``: the scene's program features (plan)."""
+    x0, y0, x1, y1 = window
+    w, h = x1 - x0, y1 - y0
+    sub = max(1, int(subpixels))
+    n = w * h * sub * sub
+    grid_pos, grid_nrm = device.empty(16 * n), device.empty(16 * n)
+    device.kernel(_PROGRAM, "ShadingPoints_trace", scene_defines)(
+        n, *buffers.kernel_args(), np.array(window, np.int32), np.int32(sub), np.int32(max_bounces), grid_pos, grid_nrm)
+    pos, nrm, pixel, slot = device.empty(16 * n), device.empty(16 * n), device.empty(8 * n), device.empty(4 * n)
+    count = _compact(device, grid_pos, grid_nrm, n, w, sub, pos, nrm, pixel, slot)
+    return ShadingPoints(device, grid_pos, grid_nrm, pos, nrm, pixel, slot, count, w, h, sub)
+
+
+def _compact(device: Device, grid_pos, grid_nrm, n: int, width: int, sub: int, pos, nrm, pixel, slot) -> int:
+    """Copy the slots that hold a point to the point lists, in slot order;
+    returns how many there are."""
+    if n == 0:
+        return 0
+    kernel = primitives.scan_kernel(
+        device, np.int32,
+        "__global const float4 *grid_pos, __global const float4 *grid_nrm, __global float4 *pos, "
+        "__global float4 *nrm, __global int2 *pixel, __global int *slot, __global int *count, "
+        "const int width, const int sub2",
+        "grid_pos[i].w > 0.0f ? 1 : 0",
+        "if (prev_item != item) { int j = item - 1; pos[j] = grid_pos[i]; nrm[j] = grid_nrm[i]; slot[j] = i; "
+        "int p = i / sub2; pixel[j] = (int2)(p % width, p / width); } if (i + 1 == N) *count = item;")
+    count = device.empty(4)
+    f4 = cltypes.float4
+    kernel(device.view(grid_pos, n, f4), device.view(grid_nrm, n, f4), device.view(pos, n, f4), device.view(nrm, n, f4),
+           device.view(pixel, n, cltypes.int2), device.view(slot, n, np.int32), device.view(count, 1, np.int32),
+           np.int32(width), np.int32(sub * sub), size=n, queue=device.queue)
+    return int(device.scalar(count))

@@ -1,0 +1,111 @@
+"""Photon emission: how much power each emitter sends out in Cycles' units
+(photons/photon_emit.h draws the photons), how the photons are shared
+among emitters, and which photon maps a scene needs.
+
+Power in watts: the photons of a map carry, all together, the power the
+lights emit (kernels: shading/lights.h and photons/photon_emit.h).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..device.constants import LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN, PHOTON_EMITTER_WORLD
+from ..device.layout import EMITTER_DTYPE
+from ..scene.model import Scene
+from ..scene.tables import SceneTables
+
+
+@dataclass
+class Emitter:
+    """One emitter: its light row (or PHOTON_EMITTER_WORLD), the rgb watts
+    it emits, and the watts its photons carry before per-photon factors (a
+    spot's photons cover its whole cone and the kernel applies the falloff)."""
+
+    row: int
+    power: np.ndarray
+    carried: np.ndarray
+
+
+def spot_power(power: np.ndarray, cos_half: float, spot_smooth: float) -> np.ndarray:
+    """Power a spot light emits: P / (4 pi) times the integral of its
+    smoothstep falloff over the sphere, 2 pi int smoothstep((c - cos_half) s) dc."""
+    width = 1.0 - cos_half
+    a = min(width * spot_smooth, 1.0)
+    ramp = (a**3 - 0.5 * a**4) / spot_smooth  # the smoothstep's rise
+    flat = max(width - 1.0 / spot_smooth, 0.0)  # where it is 1
+    return np.asarray(power, np.float64) * 0.5 * (ramp + flat)
+
+
+def emitter_powers(scene: Scene, tables: SceneTables) -> list[Emitter]:
+    """Every emitter with power, from the scene's light table; the sun and
+    the world cover the scene's bounding sphere."""
+    radius = tables.radius
+    out = []
+    for row, light in enumerate(tables.lights):
+        kind, power = int(light["kind"]), light["power"][:3].astype(np.float64)
+        carried = None
+        if kind in (LIGHT_POINT, LIGHT_AREA):
+            total = power
+        elif kind == LIGHT_SPOT:
+            total = spot_power(power, float(light["cos_half"]), float(light["spot_smooth"]))
+            carried = power * 0.5 * (1.0 - float(light["cos_half"]))  # P / (4 pi) x the cone's solid angle
+        elif kind == LIGHT_SUN:
+            total = power * np.pi * radius**2
+        elif kind == LIGHT_MESH:
+            total = _mesh_power(scene, tables)
+        else:
+            continue
+        if np.sum(total) > 0:
+            out.append(Emitter(row, total, total if carried is None else carried))
+    world = np.asarray(scene.world_color, np.float64)
+    if np.sum(world) > 0:
+        total = 4.0 * np.pi**2 * radius**2 * world
+        out.append(Emitter(PHOTON_EMITTER_WORLD, total, total))
+    return out
+
+
+def _mesh_power(scene: Scene, tables: SceneTables) -> np.ndarray:
+    """Both faces of every emissive triangle: sum of 2 pi A L_e."""
+    tris = scene.triangles[tables.emit_tris]
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    emission = tables.materials["emission"][:, :3].astype(np.float64)[scene.material_ids[tables.emit_tris]]
+    return 2.0 * np.pi * (area[:, None] * emission).sum(axis=0)
+
+
+def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:
+    """Emitter rows: photons in proportion to power (at least one each)."""
+    table = np.zeros(len(emitters), EMITTER_DTYPE)
+    if not emitters:
+        return table
+    weight = np.array([e.power.sum() for e in emitters])
+    counts = np.maximum(1, np.rint(photons * weight / weight.sum())).astype(np.int64)
+    table["first"] = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    table["count"] = counts
+    table["light"] = [e.row for e in emitters]
+    per_photon = np.array([e.carried for e in emitters]) / counts[:, None]
+    table["power"][:, :3] = np.minimum(per_photon, np.finfo(np.float32).max)
+    return table
+
+
+MAPS = ("global", "caustic")
+
+
+def maps_needed(emitters: list[Emitter], triangle_count: int, specular: bool, global_photons: int,
+                caustic_photons: int) -> dict[str, str]:
+    """Each map: "built" (with the reason for a caustic map) or "skipped:"
+    and why. A caustic map only where a specular surface can focus light."""
+    if not emitters:
+        return {name: "skipped: no light emits power" for name in MAPS}
+    if triangle_count == 0:
+        return {name: "skipped: no surfaces" for name in MAPS}
+    out = {"global": "built" if global_photons > 0 else "skipped: zero photons asked for"}
+    if not specular:
+        out["caustic"] = "skipped: no specular or transmissive surface"
+    elif caustic_photons <= 0:
+        out["caustic"] = "skipped: zero photons asked for"
+    else:
+        out["caustic"] = "built: specular or transmissive surfaces present"
+    return out

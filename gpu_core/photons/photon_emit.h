@@ -1,0 +1,112 @@
+/* Photon emission from every light kind, in the units of lights.h, so the
+ * photons of one light carry its whole emitted power in watts:
+ *   point:  P, uniform over the sphere of directions from its centre;
+ *   spot:   P/(4 pi) times the cone falloff, directions uniform in the cone;
+ *   sun:    S pi R^2 through a disk of radius R facing the sun, covering the
+ *           scene's bounding sphere, directions uniform in the sun's cone;
+ *   area:   P, a uniform point on the shape, cosine-weighted around -Z;
+ *   mesh:   2 pi A L_e per triangle (both faces), a triangle by the power
+ *           CDF, a uniform point, a face, a cosine-weighted direction;
+ *   world:  4 pi^2 R^2 L, a uniform direction and a uniform point on the
+ *           disk of the bounding sphere facing it.
+ * The host splits the photons over emitters in proportion to power
+ * (gpu_core/photons/emit.py) and gives each emitter its power per photon
+ * (PhotonEmitter, device/structs.h). */
+#ifndef GPUGI_PHOTON_EMIT_H
+#define GPUGI_PHOTON_EMIT_H
+#include "device/rng.h"
+#include "device/sampling.h"
+#include "device/ray.h"
+#include "shading/lights.h"
+
+/* A photon leaving its emitter. */
+typedef struct {
+    float3 org;
+    float3 dir;
+    float3 power;
+} PhotonRay;
+
+/* Uniform direction on the unit sphere. */
+inline float3 PhotonEmit_sphere(float u1, float u2) {
+    float z = 1.0f - 2.0f * u1;
+    float s = sqrt(fmax(0.0f, 1.0f - z * z));
+    float phi = 2.0f * PI_F * u2;
+    return (float3)(s * cos(phi), s * sin(phi), z);
+}
+
+/* A ray along dir through a uniform point of the disk of the bounding
+ * sphere (centre xyz, radius w) facing it, starting outside the sphere. */
+inline float3 PhotonEmit_disk_origin(float4 sphere, float3 dir, float u1, float u2) {
+    float3 t, b;
+    Sampling_frame(dir, &t, &b);
+    float2 d = Sampling_disk(u1, u2) * sphere.w;
+    return sphere.xyz - 1.01f * sphere.w * dir + d.x * t + d.y * b;
+}
+
+/* Emissive triangles: the one picked by u0 on the power CDF, a uniform
+ * point and face, and the power of a photon from it out of `count`. */
+inline PhotonRay PhotonEmit_mesh(const Emitters *em, int count, float u0, Rng *rng) {
+    PhotonRay r;
+    r.power = (float3)(0.0f);
+    r.org = r.dir = (float3)(0.0f, 0.0f, 1.0f);
+    int lo = 0, hi = em->count - 1;
+    while (lo < hi) {
+        int mid = (lo + hi) / 2;
+        if (em->cdf[mid] <= u0) lo = mid + 1; else hi = mid;
+    }
+    float pick = em->cdf[lo] - (lo > 0 ? em->cdf[lo - 1] : 0.0f);
+    int tri = em->tris[lo];
+    float3 v0 = em->verts[3 * tri].xyz, v1 = em->verts[3 * tri + 1].xyz, v2 = em->verts[3 * tri + 2].xyz;
+    float3 cr = cross(v1 - v0, v2 - v0);
+    float len_cr = length(cr);
+    if (!(pick > 0.0f && len_cr > 0.0f)) return r;
+    float2 bc = Sampling_triangle(Rng_next(rng), Rng_next(rng));
+    float3 n = cr / len_cr;
+    if (Rng_next(rng) < 0.5f) n = -n;
+    float eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
+    r.org = v0 + bc.x * (v1 - v0) + bc.y * (v2 - v0) + eps * n;
+    r.dir = Sampling_cosine(n, Rng_next(rng), Rng_next(rng));
+    float3 le = em->materials[em->tri_material[tri]].emission.xyz;
+    r.power = le * (2.0f * PI_F * 0.5f * len_cr / (pick * (float)count));
+    return r;
+}
+
+/* Photon j of emitter e; sphere is the scene's bounding sphere. */
+inline PhotonRay PhotonEmit_photon(const PhotonEmitter *e, const __global Light *lights, const Emitters *em,
+                            float4 sphere, int j, Rng *rng) {
+    PhotonRay r;
+    r.power = e->power.xyz;
+    float u1 = Rng_next(rng), u2 = Rng_next(rng);
+    if (e->light == PHOTON_EMITTER_WORLD) {
+        r.dir = PhotonEmit_sphere(u1, u2);
+        r.org = PhotonEmit_disk_origin(sphere, r.dir, Rng_next(rng), Rng_next(rng));
+        return r;
+    }
+    Light l = lights[e->light];
+    if (l.kind == LIGHT_MESH) {
+        /* stratified over the CDF, so the triangles get their share */
+        return PhotonEmit_mesh(em, e->count, ((float)j + u1) / (float)e->count, rng);
+    }
+    if (l.kind == LIGHT_SUN) {
+        float3 axis = l.direction.xyz;
+        r.dir = l.cos_half < 1.0f ? Sampling_cone(axis, l.cos_half, u1, u2) : axis;
+        r.org = PhotonEmit_disk_origin(sphere, axis, Rng_next(rng), Rng_next(rng));
+        return r;
+    }
+    if (l.kind == LIGHT_AREA) {
+        float2 q = l.shape == AREA_ELLIPSE ? 0.5f * Sampling_disk(u1, u2) : (float2)(u1 - 0.5f, u2 - 0.5f);
+        r.org = l.position.xyz + q.x * l.axis_u.xyz + q.y * l.axis_v.xyz;
+        r.dir = Sampling_cosine(l.direction.xyz, Rng_next(rng), Rng_next(rng));
+        return r;
+    }
+    r.org = l.position.xyz;
+    if (l.kind == LIGHT_SPOT) {
+        r.dir = Sampling_cone(l.direction.xyz, l.cos_half, u1, u2);
+        r.power *= Light_spot_attenuation(&l, r.dir);
+    } else {
+        r.dir = PhotonEmit_sphere(u1, u2);
+    }
+    return r;
+}
+
+#endif

@@ -1,0 +1,131 @@
+/* Photon tracing through the triangle kd-tree, one work item per emitted
+ * photon. Scattering follows image.cl: stochastic alpha, then one lobe
+ * by the Principled weights (mirror, smooth glass with Fresnel, Lambert);
+ * Russian roulette by albedo keeps photon powers even; a limit on
+ * scattering events and one on specular bounces end long paths. Three
+ * passes (PHOTON_PASS_*) use this kernel:
+ *   global:  a photon is stored at every diffuse hit but those of paths
+ *            light -> specular+ -> diffuse, which the caustic map holds;
+ *   caustic: only paths light -> specular+ -> diffuse are followed, and the
+ *            photon is stored at that diffuse hit;
+ *   all:     a photon is stored at every diffuse hit (the global map of a
+ *            scene whose caustic map is not traced).
+ * Stored photons go to slots taken from an atomic counter; those past the
+ * capacity are counted but not written, so the host can retry larger. Each
+ * also gets a key, photon index x stride + its stores so far, by which the
+ * host puts them in an order that does not depend on the scheduling
+ * (Photon_reorder): the same scene gives the same photon maps. */
+#include "shading/surface.h"
+#include "photons/photon_emit.h"
+
+#define PHOTON_MAX_PASSTHROUGH 64
+
+/* Russian roulette by albedo: survive with probability max(albedo), the
+ * survivor's power scaled by albedo / that probability. */
+inline bool Photon_roulette(float3 albedo, float3 *power, Rng *rng) {
+    float q = fmin(fmax(fmax(albedo.x, albedo.y), albedo.z), 1.0f);
+    if (!(q > 0.0f) || Rng_next(rng) >= q) return false;
+    *power *= albedo / q;
+    return true;
+}
+
+/* Emitter of photon i: the last one whose first photon is <= i. */
+inline int Photon_emitter(const __global PhotonEmitter *emitters, int n_emitters, int i) {
+    int lo = 0, hi = n_emitters - 1;
+    while (lo < hi) {
+        int mid = (lo + hi + 1) / 2;
+        if (emitters[mid].first <= i) lo = mid; else hi = mid - 1;
+    }
+    return lo;
+}
+
+/* Store a photon: position, incident direction pointing back along the
+ * path, power, normal, and its key. */
+inline void Photon_store(float3 p, float3 incident, float3 power, float3 n, uint key, volatile __global int *counter,
+                         int capacity, __global float4 *out_pos, __global float4 *out_dir,
+                         __global float4 *out_power, __global float4 *out_normal, __global uint *out_key) {
+    int slot = atomic_inc(counter);
+    if (slot >= capacity) return;
+    out_key[slot] = key;
+    out_pos[slot] = (float4)(p, 0.0f);
+    out_dir[slot] = (float4)(incident, 0.0f);
+    out_power[slot] = (float4)(power, 0.0f);
+    out_normal[slot] = (float4)(n, 0.0f);
+}
+
+/* One photon path per work item. path_out[i] = (emitted power rgb, surface
+ * hits of the path), for the host's statistics. */
+__kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters, const int n_emitters,
+                           const float4 sphere, const int n_photons, const uint seed, const int pass,
+                           const int max_bounces, const int max_specular, volatile __global int *counter,
+                           const int capacity, __global float4 *out_pos, __global float4 *out_dir,
+                           __global float4 *out_power, __global float4 *out_normal, __global uint *out_key,
+                           const uint key_stride, __global float4 *path_out) {
+    int i = get_global_id(0);
+    if (i >= n_photons) return;
+    SceneView sc = SCENE_MAKE();
+    Rng rng = Rng_make((uint)i, pass == PHOTON_PASS_CAUSTIC ? 1u : 0u, seed); /* one stream per map */
+    PhotonEmitter e = emitters[Photon_emitter(emitters, n_emitters, i)];
+    PhotonRay ray = PhotonEmit_photon(&e, sc.lights, &sc.em, sphere, i - e.first, &rng);
+    float3 org = ray.org, dir = ray.dir, power = ray.power;
+    path_out[i] = (float4)(power, 0.0f);
+    if (!(power.x > 0.0f || power.y > 0.0f || power.z > 0.0f)) return;
+
+    int hits = 0, bounces = 0, specular = 0, passes = 0;
+    uint stores = 0;
+    bool caustic = false; /* the path so far is light -> specular+ */
+    while (true) {
+        Hit hit;
+        if (!KdTree_intersect(&sc.tree, org, dir, 0.0f, RAY_FAR, &hit)) break;
+        hits++;
+        SurfacePoint sp = Surface_at(&sc, dir, &hit);
+        Material m = sc.materials[sp.material];
+        float3 base = Surface_base(&sc, &m, sp.uv);
+        /* stochastic alpha: pass straight through */
+        if (m.base_color.w < 1.0f && Rng_next(&rng) >= m.base_color.w && passes < PHOTON_MAX_PASSTHROUGH) {
+            passes++;
+            org = sp.p - sp.eps * sp.ng;
+            continue;
+        }
+        int lobe = Bsdf_pick(&m, Rng_next(&rng));
+        if (lobe == BSDF_DIFFUSE) {
+            if (pass == PHOTON_PASS_ALL || (pass == PHOTON_PASS_GLOBAL) != caustic)
+                Photon_store(sp.p, -dir, power, sp.ns, (uint)i * key_stride + stores++, counter, capacity, out_pos,
+                             out_dir, out_power, out_normal, out_key);
+            if (pass == PHOTON_PASS_CAUSTIC || bounces >= max_bounces) break;
+            if (!Photon_roulette(base, &power, &rng)) break;
+            dir = Sampling_cosine(sp.ns, Rng_next(&rng), Rng_next(&rng));
+            if (dot(dir, sp.ng) <= 0.0f) break;
+            org = sp.p + sp.eps * sp.ng;
+            caustic = false;
+            bounces++;
+            continue;
+        }
+        if (bounces >= max_bounces || specular >= max_specular) break;
+        bool refracted;
+        float u = lobe == BSDF_GLASS ? Rng_next(&rng) : 0.0f;
+        float3 tint = Surface_specular(&sp, &m, lobe, base, u, &dir, &org, &refracted);
+        /* a glass reflection keeps all the power: no roulette */
+        if ((lobe == BSDF_MIRROR || refracted) && !Photon_roulette(tint, &power, &rng)) break;
+        /* specular straight from the light starts a caustic path */
+        caustic = bounces == 0 || caustic;
+        bounces++;
+        specular++;
+    }
+    path_out[i].w = (float)hits;
+}
+
+/* The stored photons in key order (order[j]: the slot of the j-th smallest
+ * key), each position's w its new index, as the point tree takes them. */
+__kernel void Photon_reorder(const __global int *order, const int n, const __global float4 *pos,
+                             const __global float4 *dir, const __global float4 *power, const __global float4 *normal,
+                             __global float4 *out_pos, __global float4 *out_dir, __global float4 *out_power,
+                             __global float4 *out_normal) {
+    int j = get_global_id(0);
+    if (j >= n) return;
+    int o = order[j];
+    out_pos[j] = (float4)(pos[o].xyz, as_float(j));
+    out_dir[j] = dir[o];
+    out_power[j] = power[o];
+    out_normal[j] = normal[o];
+}

@@ -1,0 +1,202 @@
+"""The plan of a render, decided before anything runs.
+
+``plan(scene, settings, held, edits)`` reads the validated scene, the
+settings, what the renderer already holds on the device from earlier
+renders (``Held``) and the edits since then, and decides: the scene parts
+to upload, the stages that run and what they reuse (and why), the kernel
+features the scene needs, the photon maps, the programs to build, and the
+device memory all of it takes, GI included, so that a budget error comes
+before any kernel fails. The stages read the plan; none decides again. The
+render stats print it (``Plan.stages``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .errors import BudgetError
+from .gi import pipeline as gi_pipeline
+from .image import film_bytes
+from .image import programs as image_programs
+from .photons import trace as photon_trace
+from .photons.emit import Emitter, emitter_powers, maps_needed
+from .accel import kdtree_build
+from .scene.model import PARTS, Scene, part_digests
+from .scene.tables import SceneTables, scene_tables
+from .settings import RenderSettings
+
+# settings photon tracing reads: a change traces the maps again
+_PHOTON_KNOBS = ("global_photons", "caustic_photons", "seed", "photon_k", "max_bounces")
+# scene parts the photon maps are made from
+_PHOTON_PARTS = ("geometry", "materials", "lights", "world")
+
+
+@dataclass
+class Held:
+    """What a renderer keeps on the device between renders, as the plan
+    sees it: each part's digest and generation (bumped at every change),
+    the tables uploaded, and the key of the photon maps held."""
+
+    digests: dict | None = None  # part -> digest of what is uploaded (None: unknown)
+    generations: dict = field(default_factory=lambda: {part: 0 for part in PARTS})
+    tables: SceneTables | None = None
+    photon_key: tuple | None = None
+
+
+@dataclass
+class Plan:
+    """What one render does."""
+
+    mode: str
+    stages: list[str]  # stages and features in order; "_reused" where kept from an earlier render
+    changed: set[str]  # scene parts uploaded
+    digests: dict | None  # the scene's part digests (None when the caller named the edits)
+    generations: dict  # part generations after this render's changes
+    tables: SceneTables
+    emitters: list[Emitter]
+    photon_maps: dict[str, str]  # map -> "built..." or "skipped: why"
+    photons_reused: bool  # the maps held are used again
+    photon_key: tuple | None  # of the maps this render uses
+    scene_defines: dict  # program features of every kernel that reads the scene
+    image_defines: dict  # the image kernel's, scene features included
+    programs: list[tuple[str, dict]]  # every program the render builds
+    device_bytes: int
+    largest_buffer: int
+    reuse: dict = field(default_factory=dict)  # what is kept, and why
+
+    @property
+    def traces_photons(self) -> bool:
+        return not self.photons_reused and any(v.startswith("built") for v in self.photon_maps.values())
+
+    def check_budget(self, device) -> None:
+        """A clear error before any upload when the render cannot fit the device."""
+        if self.device_bytes > device.global_mem_bytes or self.largest_buffer > device.max_alloc_bytes:
+            raise BudgetError(
+                f"the render needs about {self.device_bytes / 2**20:.0f} MiB of device memory "
+                f"(largest buffer {self.largest_buffer / 2**20:.0f} MiB); {device.name} has "
+                f"{device.global_mem_bytes / 2**20:.0f} MiB ({device.max_alloc_bytes / 2**20:.0f} MiB per buffer). "
+                "Lower the resolution, texture sizes or photon counts, or simplify the scene."
+            )
+
+
+def changed_parts(scene: Scene, held: Held, edits: set[str] | None) -> tuple[set[str], dict | None]:
+    """The parts that differ from what is held (all when nothing is), and
+    the scene's part digests; ``edits`` (named by the caller, who knows what
+    it changed) skips the hashing."""
+    if edits is not None:
+        return (set(PARTS) if held.tables is None else set(edits) & set(PARTS)), None
+    digests = part_digests(scene)
+    if held.digests is None or held.tables is None:
+        return set(PARTS), digests
+    return {part for part in PARTS if digests[part] != held.digests[part]}, digests
+
+
+def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits: set[str] | None = None,
+         device=None) -> Plan:
+    """The plan of rendering the validated ``scene`` with validated
+    ``settings`` after what ``held`` says is on the device."""
+    held = held or Held()
+    changed, digests = changed_parts(scene, held, edits)
+    tables = scene_tables(scene, held.tables, changed)
+    if held.tables is not None and (tables.center != held.tables.center).any():
+        changed = set(PARTS)  # the frame moved: everything is uploaded again
+    generations = {part: held.generations[part] + (part in changed) for part in PARTS}
+    stages = ["validate", "kdtree_reused" if "geometry" not in changed else "kdtree", "upload", "direct_light"]
+    stages += _features(scene, settings, tables)
+    scene_defines = {"SCENE_HAS_TEXTURES": 1} if "textures" in stages else {}
+    if "alpha_shadows" in stages:
+        scene_defines["SCENE_HAS_ALPHA"] = 1
+    image_defines = dict(scene_defines)
+    emitters, maps, photon_key, reuse, reused = [], {}, None, {}, False
+    if settings.mode == "gi":
+        image_defines["IMAGE_GI"] = 1
+        emitters = emitter_powers(scene, tables)
+        maps = maps_needed(emitters, scene.triangle_count, scene.has_specular(), settings.global_photons,
+                           settings.caustic_photons)
+        photon_key = tuple(getattr(settings, k) for k in _PHOTON_KNOBS) + tuple(generations[p] for p in _PHOTON_PARTS)
+        reused = photon_key == held.photon_key
+        if reused:
+            reuse["photons"] = "neither the lit scene nor the photon settings changed"
+        stages += _gi_stages(maps, reused)
+    if "geometry" not in changed:
+        reuse["kdtree"] = "the triangles did not change"
+    the_plan = Plan(
+        mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
+        emitters=emitters, photon_maps=maps, photons_reused=reused, photon_key=photon_key, scene_defines=scene_defines,
+        image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
+    the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
+    if device is not None and hasattr(device, "device"):
+        the_plan.programs = _programs(device, settings, the_plan)
+    return the_plan
+
+
+def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> list[str]:
+    """The kernel features this scene and these settings need."""
+    features = []
+    if scene.has_specular():
+        features.append("specular_paths")
+    if settings.diffuse_bounces > 0 and settings.mode != "gi":
+        features.append("path_traced_indirect")
+    if scene.has_textures():
+        features.append("textures")
+    if len(tables.emit_tris):
+        features.append("mesh_lights")
+    if scene.has_alpha():
+        features.append("alpha_shadows")
+    if settings.light_passes:
+        features.append("light_passes")
+    if settings.denoising_passes:
+        features.append("denoising_passes")
+    return features
+
+
+def _gi_stages(maps: dict[str, str], reused: bool) -> list[str]:
+    """The GI stages: the photon maps traced (or reused), then the cache
+    stages where there is light, and caustics where there is a caustic map."""
+    stages = [f"{name}_photons" + ("_reused" if reused else "") for name in ("global", "caustic")
+              if maps[name].startswith("built")]
+    if maps["global"].startswith("built"):
+        stages += ["shading_points", "sample_points", "illumination_cut", "final_gather", "interpolation"]
+    elif maps["caustic"].startswith("built"):
+        stages.append("shading_points")
+    if maps["caustic"].startswith("built"):
+        stages.append("caustics")
+    return stages
+
+
+# device bytes per item, generous estimates (the kd-tree's own arrays vary with the scene)
+_TRIANGLE_BYTES = 48 + 48 + 24 + 4 + 4 * 8 + 16  # corners, normals, uvs, material, leaf references and nodes
+_STORED_PHOTON_BYTES = 4 * 16 + 4 * 16 + 16  # trace buffers, tree points and attributes, a node share
+_GRID_SLOT_BYTES = 4 * 16 + 16 + 16 + 8 + 4 + 16 + 24  # grid, compacted point, cache work arrays
+
+
+def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tuple[int, int]:
+    """Device memory of the render (GI included), and its largest buffer."""
+    tables = the_plan.tables
+    n = scene.triangle_count
+    texels = len(tables.atlas) * 16
+    window = scene.camera.pixel_window
+    film = film_bytes(window, settings)
+    need = n * _TRIANGLE_BYTES + texels + film + tables.lights.nbytes + tables.materials.nbytes
+    largest = max(n * 48, texels, film)
+    if settings.mode == "gi":
+        x0, y0, x1, y1 = window
+        slots = (x1 - x0) * (y1 - y0) * 4
+        stored = 0
+        if the_plan.photon_maps.get("global", "").startswith("built"):
+            stored += photon_trace.STORE_GUESS * settings.global_photons
+        if the_plan.photon_maps.get("caustic", "").startswith("built"):
+            stored += settings.caustic_photons
+        need += stored * _STORED_PHOTON_BYTES + slots * _GRID_SLOT_BYTES
+        largest = max(largest, photon_trace.STORE_GUESS * settings.global_photons * 16, slots * 16)
+    return int(need), int(largest)
+
+
+def _programs(device, settings: RenderSettings, the_plan: Plan) -> list[tuple[str, dict]]:
+    """Every program the render builds, for building them up front."""
+    wanted = kdtree_build.programs(device) + image_programs(the_plan.image_defines)
+    if settings.mode == "gi":
+        if the_plan.traces_photons:
+            wanted += photon_trace.programs(the_plan.scene_defines)
+        wanted += gi_pipeline.programs(device, settings, the_plan.stages, the_plan.scene_defines)
+    return wanted

@@ -1,0 +1,20 @@
+"""The scene: its plain-numpy model, validation on entry, the tables the
+kernels read, and the one device copy every kernel reads."""
+
+from ..device.constants import (
+    AREA_ELLIPSE,
+    AREA_RECTANGLE,
+    CAMERA_ORTHO,
+    CAMERA_PERSP,
+    LIGHT_AREA,
+    LIGHT_POINT,
+    LIGHT_SPOT,
+    LIGHT_SUN,
+)
+from .model import PARTS, Camera, Lights, Materials, Scene, ValidationReport, part_digests
+from .validate import validate
+
+__all__ = [
+    "AREA_ELLIPSE", "AREA_RECTANGLE", "CAMERA_ORTHO", "CAMERA_PERSP", "LIGHT_AREA", "LIGHT_POINT", "LIGHT_SPOT",
+    "LIGHT_SUN", "PARTS", "Camera", "Lights", "Materials", "Scene", "ValidationReport", "part_digests", "validate",
+]

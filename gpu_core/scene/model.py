@@ -1,0 +1,267 @@
+"""The plain-numpy scene gpu_core renders (validate.py checks it on entry).
+
+Everything is a struct of arrays in world space, in Blender's units:
+light power in watts (sun: W/m^2), emission as radiance (colour x strength),
+world colour x strength as radiance. Positions are float64 so that a scene far
+from the origin keeps its precision until the renderer recentres it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from ..device.constants import AREA_RECTANGLE, CAMERA_PERSP, LIGHT_POINT, LIGHT_SUN
+
+
+@dataclass
+class Materials:
+    """One row per material; a triangle's ``material_ids`` entry indexes it."""
+
+    base_color: np.ndarray  # (M, 3) float32, linear
+    metallic: np.ndarray  # (M,) float32
+    roughness: np.ndarray  # (M,) float32
+    transmission: np.ndarray  # (M,) float32
+    ior: np.ndarray  # (M,) float32
+    emission: np.ndarray  # (M, 3) float32, colour x strength (radiance)
+    alpha: np.ndarray  # (M,) float32
+    texture_id: np.ndarray  # (M,) int32 into Scene.textures, -1 for none
+    names: list[str] = field(default_factory=list)
+
+    @staticmethod
+    def make(rows: list[dict]) -> "Materials":
+        """Materials from dicts with the field names above (missing ones default)."""
+        defaults = dict(
+            base_color=(0.8, 0.8, 0.8),
+            metallic=0.0,
+            roughness=0.5,
+            transmission=0.0,
+            ior=1.5,
+            emission=(0.0, 0.0, 0.0),
+            alpha=1.0,
+            texture_id=-1,
+            name="",
+        )
+        rows = [{**defaults, **row} for row in rows] or [dict(defaults, name="default")]
+
+        def column(key, dtype, width=None):
+            shape = (len(rows), width) if width else (len(rows),)
+            return np.array([row[key] for row in rows], dtype=dtype).reshape(shape)
+
+        return Materials(
+            base_color=column("base_color", np.float32, 3),
+            metallic=column("metallic", np.float32),
+            roughness=column("roughness", np.float32),
+            transmission=column("transmission", np.float32),
+            ior=column("ior", np.float32),
+            emission=column("emission", np.float32, 3),
+            alpha=column("alpha", np.float32),
+            texture_id=column("texture_id", np.int32),
+            names=[row["name"] for row in rows],
+        )
+
+    def __len__(self) -> int:
+        return len(self.base_color)
+
+
+@dataclass
+class Lights:
+    """One row per light (emissive meshes are triangles, not rows here)."""
+
+    kind: np.ndarray  # (L,) int32, LIGHT_*
+    position: np.ndarray  # (L, 3) float64
+    direction: np.ndarray  # (L, 3) float32, unit, where the light points (its -Z)
+    axis_u: np.ndarray  # (L, 3) float32, area light: full size along its X
+    axis_v: np.ndarray  # (L, 3) float32, area light: full size along its Y
+    power: np.ndarray  # (L, 3) float32, colour x watts (sun: colour x W/m^2)
+    radius: np.ndarray  # (L,) float32, point/spot soft radius
+    spot_angle: np.ndarray  # (L,) float32, full cone angle in radians
+    spot_blend: np.ndarray  # (L,) float32, 0..1
+    sun_angle: np.ndarray  # (L,) float32, angular diameter in radians
+    shape: np.ndarray  # (L,) int32, AREA_RECTANGLE or AREA_ELLIPSE
+    names: list[str] = field(default_factory=list)
+
+    @staticmethod
+    def make(rows: list[dict]) -> "Lights":
+        """Lights from dicts with the field names above (missing ones default)."""
+        defaults = dict(
+            kind=LIGHT_POINT,
+            position=(0.0, 0.0, 0.0),
+            direction=(0.0, 0.0, -1.0),
+            axis_u=(1.0, 0.0, 0.0),
+            axis_v=(0.0, 1.0, 0.0),
+            power=(0.0, 0.0, 0.0),
+            radius=0.0,
+            spot_angle=np.pi / 4,
+            spot_blend=0.15,
+            sun_angle=0.0,
+            shape=AREA_RECTANGLE,
+            name="",
+        )
+        rows = [{**defaults, **row} for row in rows]
+
+        def column(key, dtype, width=None):
+            shape = (len(rows), width) if width else (len(rows),)
+            return np.array([row[key] for row in rows], dtype=dtype).reshape(shape)
+
+        return Lights(
+            kind=column("kind", np.int32),
+            position=column("position", np.float64, 3),
+            direction=column("direction", np.float32, 3),
+            axis_u=column("axis_u", np.float32, 3),
+            axis_v=column("axis_v", np.float32, 3),
+            power=column("power", np.float32, 3),
+            radius=column("radius", np.float32),
+            spot_angle=column("spot_angle", np.float32),
+            spot_blend=column("spot_blend", np.float32),
+            sun_angle=column("sun_angle", np.float32),
+            shape=column("shape", np.int32),
+            names=[row["name"] for row in rows],
+        )
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+    def subset(self, keep: np.ndarray) -> "Lights":
+        names = [n for n, k in zip(self.names, keep) if k] if self.names else []
+        return Lights(
+            **{
+                name: getattr(self, name)[keep]
+                for name in (
+                    "kind position direction axis_u axis_v power radius "
+                    "spot_angle spot_blend sun_angle shape"
+                ).split()
+            },
+            names=names,
+        )
+
+
+@dataclass
+class Camera:
+    """A pinhole or orthographic camera and the pixels to render.
+
+    ``window`` (x0, x1, y0, y1) is the image rectangle in camera space: on the
+    plane z = -1 for a perspective camera (sensor fit and lens shift already
+    applied), in scene units for an orthographic one. ``border`` (x0, y0, x1,
+    y1) is the pixel window to render, x1/y1 exclusive; rows count from the
+    bottom, as in Blender's render result.
+    """
+
+    matrix: np.ndarray  # (4, 4) float64, camera to world (camera looks down -Z)
+    window: tuple[float, float, float, float]
+    width: int
+    height: int
+    kind: int = CAMERA_PERSP
+    clip_start: float = 0.1
+    clip_end: float = 1000.0
+    border: tuple[int, int, int, int] | None = None
+
+    @property
+    def pixel_window(self) -> tuple[int, int, int, int]:
+        if self.border is None:
+            return (0, 0, self.width, self.height)
+        return self.border
+
+
+@dataclass
+class ValidationReport:
+    """What validation dropped or repaired, for stats and warnings."""
+
+    dropped_nonfinite_triangles: int = 0
+    dropped_degenerate_triangles: int = 0
+    repaired_material_ids: int = 0
+    repaired_normals: int = 0
+    dropped_lights: int = 0
+    repaired_materials: int = 0
+    messages: list[str] = field(default_factory=list)
+
+    def as_stats(self) -> dict:
+        return {
+            "dropped_nonfinite_triangles": self.dropped_nonfinite_triangles,
+            "dropped_degenerate_triangles": self.dropped_degenerate_triangles,
+            "repaired_material_ids": self.repaired_material_ids,
+            "repaired_normals": self.repaired_normals,
+            "dropped_lights": self.dropped_lights,
+            "repaired_materials": self.repaired_materials,
+        }
+
+
+@dataclass
+class Scene:
+    """Triangles (a soup), their materials, lights, world and camera."""
+
+    triangles: np.ndarray  # (N, 3, 3) float64 world positions
+    normals: np.ndarray  # (N, 3, 3) float32 corner normals (world, unit)
+    uvs: np.ndarray  # (N, 3, 2) float32
+    material_ids: np.ndarray  # (N,) int32
+    materials: Materials
+    lights: Lights
+    camera: Camera
+    world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    textures: list[np.ndarray] = field(default_factory=list)  # (H, W, 4) float32, linear
+    warnings: list[str] = field(default_factory=list)
+    report: ValidationReport = field(default_factory=ValidationReport)
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.triangles)
+
+    def used_materials(self) -> np.ndarray:
+        """Indices of the materials some triangle uses."""
+        return np.unique(self.material_ids)
+
+    def has_specular(self) -> bool:
+        """Whether a triangle is specular (mirror or glass): specular paths
+        and, where light reaches them, caustics."""
+        used, m = self.used_materials(), self.materials
+        return bool(((m.metallic[used] > 0) | (m.transmission[used] > 0)).any())
+
+    def has_textures(self) -> bool:
+        """Whether a triangle's material reads a texture."""
+        return bool(self.textures) and bool((self.materials.texture_id[self.used_materials()] >= 0).any())
+
+    def has_alpha(self) -> bool:
+        """Whether a triangle's material is see-through."""
+        return bool((self.materials.alpha[self.used_materials()] < 1.0).any())
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) of triangles and positional lights; a unit box if empty."""
+        points = [self.triangles.reshape(-1, 3)]
+        positional = self.lights.kind != LIGHT_SUN
+        points.append(self.lights.position[positional])
+        pts = np.concatenate([p for p in points if len(p)], axis=0) if any(len(p) for p in points) else None
+        if pts is None or len(pts) == 0:
+            return np.full(3, -1.0), np.full(3, 1.0)
+        return pts.min(axis=0), pts.max(axis=0)
+
+
+# The parts of a scene an edit can change on its own; each is uploaded, and
+# invalidates what depends on it, apart from the others (plan.py).
+PARTS = ("geometry", "materials", "lights", "world", "camera")
+
+
+def part_digests(scene: Scene) -> dict[str, bytes]:
+    """A digest of each part: renders whose parts have the same digests can
+    share what was built from those parts (kd-tree, tables, photon maps)."""
+    m, lights = scene.materials, scene.lights
+    arrays = {
+        "geometry": [scene.triangles, scene.normals, scene.uvs, scene.material_ids],
+        "materials": [getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures),
+        "lights": [getattr(lights, f.name) for f in fields(Lights) if f.name != "names"],
+        "world": [scene.world_color],
+        "camera": [np.asarray(scene.camera.matrix), np.asarray(scene.camera.window),
+                   np.array([scene.camera.width, scene.camera.height, scene.camera.kind, scene.camera.clip_start,
+                             scene.camera.clip_end, *(scene.camera.border or (-1, -1, -1, -1))], np.float64)],
+    }
+    return {part: _digest(values) for part, values in arrays.items()}
+
+
+def _digest(arrays) -> bytes:
+    digest = hashlib.blake2b(digest_size=16)
+    for array in arrays:
+        a = np.ascontiguousarray(array)
+        digest.update(str((a.dtype, a.shape)).encode())
+        digest.update(a.tobytes())
+    return digest.digest()

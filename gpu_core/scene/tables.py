@@ -1,0 +1,205 @@
+"""The scene as the kernels read it, on the host: material, light, texture
+and camera tables in the shared struct layouts (device/layout.py), and the
+emissive triangles sampled as one mesh light. Built once per scene, part by
+part (``SceneTables``), and read by the plan, the upload and photon emission,
+so all of them see the same lights in the same units."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..device.constants import AREA_ELLIPSE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN
+from ..device.layout import CAMERA_DTYPE, LIGHT_DTYPE, MATERIAL_DTYPE, TEXTURE_INFO_DTYPE
+from .model import PARTS, Scene
+
+RADIANCE_MAX = 1e30  # light radiance stays a finite float32
+
+
+@dataclass
+class SceneTables:
+    """Everything the kernels read about a validated scene but its triangles,
+    in the device frame: positions relative to ``center``."""
+
+    center: np.ndarray  # (3,) float64: the centre of the scene's bounds
+    radius: float  # of the scene's bounding sphere (sun and world photons)
+    materials: np.ndarray  # MATERIAL_DTYPE rows
+    lights: np.ndarray  # LIGHT_DTYPE rows, a LIGHT_MESH row last when there are emissive triangles
+    emit_tris: np.ndarray  # int32 emissive triangle ids
+    emit_cdf: np.ndarray  # float32 their inclusive CDF by power
+    atlas: np.ndarray  # (T, 4) float32 texels of every texture
+    texture_infos: np.ndarray  # TEXTURE_INFO_DTYPE rows
+    camera: np.ndarray  # one CAMERA_DTYPE row
+
+
+def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PARTS) -> SceneTables:
+    """The tables of a validated ``scene``; those of ``previous`` are kept
+    where no part they are made from is in ``changed``."""
+    lo, hi = scene.bounds()
+    center = 0.5 * (lo + hi)
+    moved = previous is None or not np.array_equal(center, previous.center)
+    changed = set(PARTS) if moved else set(changed)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)
+    old = previous if not moved else None
+    if old is None or changed & {"geometry", "materials"}:
+        emit_tris, emit_cdf = emissive_triangles(scene)
+    else:
+        emit_tris, emit_cdf = old.emit_tris, old.emit_cdf
+    if old is None or "materials" in changed:
+        materials = material_table(scene)
+        atlas, infos = texture_atlas(scene.textures)
+    else:
+        materials, atlas, infos = old.materials, old.atlas, old.texture_infos
+    if old is None or changed & {"lights", "geometry", "materials"}:
+        lights = light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
+    else:
+        lights = old.lights
+    camera = camera_struct(scene, center) if old is None or "camera" in changed else old.camera
+    return SceneTables(center, radius, materials, lights, emit_tris, emit_cdf, atlas, infos, camera)
+
+
+def material_table(scene: Scene) -> np.ndarray:
+    m = scene.materials
+    table = np.zeros(len(m), MATERIAL_DTYPE)
+    table["base_color"][:, :3] = np.clip(np.nan_to_num(m.base_color), 0.0, 1.0)
+    table["base_color"][:, 3] = np.clip(np.nan_to_num(m.alpha, nan=1.0), 0.0, 1.0)
+    table["emission"][:, :3] = emission_radiance(scene)
+    table["metallic"] = np.clip(np.nan_to_num(m.metallic), 0.0, 1.0)
+    table["roughness"] = np.clip(np.nan_to_num(m.roughness), 0.0, 1.0)
+    table["transmission"] = np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)
+    table["ior"] = np.clip(np.nan_to_num(m.ior, nan=1.5), 1e-3, 1e3)
+    table["texture"] = np.where(m.texture_id < len(scene.textures), m.texture_id, -1)
+    return table
+
+
+def emission_radiance(scene: Scene) -> np.ndarray:
+    """Material emission radiance, finite and not negative."""
+    e = np.nan_to_num(np.asarray(scene.materials.emission, np.float64), nan=0.0, posinf=RADIANCE_MAX)
+    return np.clip(e, 0.0, RADIANCE_MAX).astype(np.float32)
+
+
+def emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Emissive triangle ids and their inclusive CDF by power (luminance x area)."""
+    if scene.triangle_count == 0:
+        return np.zeros(0, np.int32), np.zeros(0, np.float32)
+    emission = emission_radiance(scene).astype(np.float64)[scene.material_ids]
+    luminance = emission @ np.array([0.2126, 0.7152, 0.0722])
+    tris = scene.triangles
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    power = luminance * area
+    ids = np.nonzero(power > 0)[0].astype(np.int32)
+    if ids.size == 0:
+        return ids, np.zeros(0, np.float32)
+    cdf = np.cumsum(power[ids])
+    cdf = (cdf / cdf[-1]).astype(np.float32)
+    cdf[-1] = 1.0
+    return ids, cdf
+
+
+def light_table(scene: Scene, center: np.ndarray, has_mesh_lights: bool) -> np.ndarray:
+    """Device light rows in Cycles' units (see shading/lights.h); emissive
+    meshes add one LIGHT_MESH row. Derived values are computed in float64."""
+    lights = scene.lights
+    n = len(lights)
+    table = np.zeros(n + (1 if has_mesh_lights else 0), LIGHT_DTYPE)
+    if has_mesh_lights:
+        table["kind"][n] = LIGHT_MESH
+    if not n:
+        return table
+    kind = lights.kind
+    power = finite(lights.power)
+    direction = finite(lights.direction)
+    length = np.linalg.norm(direction, axis=1, keepdims=True)
+    direction = np.where(length > 0, direction / np.where(length > 0, length, 1.0), [0.0, 0.0, -1.0])
+    axis_u, axis_v = finite(lights.axis_u), finite(lights.axis_v)
+    radius = np.maximum(finite(lights.radius), 0.0)
+
+    # area lights: radiance P / (pi A), A of the rectangle or ellipse
+    area = np.linalg.norm(np.cross(axis_u, axis_v), axis=1)
+    area = np.where(lights.shape == AREA_ELLIPSE, area * np.pi / 4.0, area)
+    is_area = kind == LIGHT_AREA
+    power[is_area & ~(area > 0)] = 0.0  # a zero-size area light emits nothing
+    radiance = np.zeros_like(power)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radiance[is_area] = power[is_area] / (np.pi * area[is_area, None])
+        # point and spot lights: a disk of radius r with radiance P / (4 pi^2 r^2)
+        disk = ((kind == LIGHT_POINT) | (kind == LIGHT_SPOT)) & (radius > 0)
+        radiance[disk] = power[disk] / (4.0 * np.pi**2 * radius[disk, None] ** 2)
+
+    # spot cone: cos of the half angle and the smoothstep scale of the blend
+    cos_half = np.ones(n)
+    spot = kind == LIGHT_SPOT
+    cos_spot = np.cos(0.5 * np.clip(finite(lights.spot_angle), 0.0, np.pi))
+    cos_half[spot] = cos_spot[spot]
+    blend_width = (1.0 - cos_spot) * np.clip(finite(lights.spot_blend), 0.0, 1.0)
+    spot_smooth = np.where(blend_width > 1e-12, 1.0 / np.maximum(blend_width, 1e-12), 1e30)
+
+    # sun: a disk of directions with radiance S / (pi sin^2(half angle))
+    sun = kind == LIGHT_SUN
+    half = 0.5 * np.clip(finite(lights.sun_angle), 0.0, np.pi)
+    cos_half[sun] = np.cos(half[sun])
+    sun_disk = sun & (half > 0)
+    radiance[sun_disk] = power[sun_disk] / (np.pi * np.sin(half[sun_disk, None]) ** 2)
+    sun_norm = np.where(sun, 2.0 / (1.0 + cos_half), 1.0)
+
+    table["position"][:n, :3] = finite(lights.position - center)
+    table["direction"][:n, :3] = direction
+    table["axis_u"][:n, :3] = axis_u
+    table["axis_v"][:n, :3] = axis_v
+    table["power"][:n, :3] = power
+    table["radiance"][:n, :3] = np.clip(np.nan_to_num(radiance, nan=0.0, posinf=RADIANCE_MAX), 0.0, RADIANCE_MAX)
+    table["radius"][:n] = radius
+    table["cos_half"][:n] = cos_half
+    table["spot_smooth"][:n] = spot_smooth
+    table["sun_norm"][:n] = sun_norm
+    table["kind"][:n] = kind
+    table["shape"][:n] = lights.shape
+    return table
+
+
+def finite(values) -> np.ndarray:
+    """float64 copy with NaN and infinities replaced by 0."""
+    return np.nan_to_num(np.asarray(values, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def texels(scene: Scene) -> int:
+    """Texels of all textures: the atlas holds one float4 each."""
+    return sum(int(np.prod(np.shape(t)[:2])) for t in scene.textures)
+
+
+def texture_atlas(textures: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """All textures in one float4 array, and each one's offset and size."""
+    infos = np.zeros(max(len(textures), 1), TEXTURE_INFO_DTYPE)
+    chunks, offset = [], 0
+    for i, tex in enumerate(textures):
+        img = np.asarray(tex, np.float32)
+        if img.ndim == 2:
+            img = img[..., None]
+        if img.shape[2] == 1:
+            img = np.concatenate([np.repeat(img, 3, axis=2), np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
+        if img.shape[2] == 3:
+            img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
+        img = np.nan_to_num(img[..., :4], nan=0.0, posinf=0.0, neginf=0.0)
+        infos[i] = (offset, img.shape[1], img.shape[0], 0)
+        chunks.append(img.reshape(-1, 4))
+        offset += img.shape[0] * img.shape[1]
+    atlas = np.concatenate(chunks) if chunks else np.zeros((1, 4), np.float32)
+    return np.ascontiguousarray(atlas, np.float32), infos
+
+
+def camera_struct(scene: Scene, center: np.ndarray) -> np.ndarray:
+    """The camera row in the device frame (positions relative to ``center``)."""
+    cam = scene.camera
+    m = np.asarray(cam.matrix, np.float64)
+    axes = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    out = np.zeros(1, CAMERA_DTYPE)
+    out["right"][0, :3] = axes[:, 0]
+    out["up"][0, :3] = axes[:, 1]
+    out["back"][0, :3] = axes[:, 2]
+    out["origin"][0, :3] = m[:3, 3] - center
+    out["window"][0] = cam.window
+    out["kind"] = CAMERA_ORTHO if cam.kind == CAMERA_ORTHO else 0
+    out["width"], out["height"] = cam.width, cam.height
+    out["clip_start"], out["clip_end"] = cam.clip_start, cam.clip_end
+    return out

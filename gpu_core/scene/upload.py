@@ -1,0 +1,94 @@
+"""The one device copy of a scene that every kernel reads.
+
+``upload(device, scene, tables, previous, changed)`` makes the
+``SceneBuffers``: the triangle kd-tree, the triangle attributes, and the
+tables of scene/tables.py. Parts that did not change keep the buffers of
+``previous``, so an edit moves only what it touched (a material colour edit
+uploads the 64-byte rows of the materials, not the triangles).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from ..accel import kdtree
+from ..device import Device
+from ..device.layout import float4_rows
+from ..device.timer import StageTimer
+from .model import PARTS, Scene
+from .tables import SceneTables
+
+
+@dataclass
+class SceneBuffers:
+    """A validated scene on the device, in its frame (positions relative to ``center``)."""
+
+    device: Device
+    center: np.ndarray  # (3,) float64
+    radius: float  # of the scene's bounding sphere
+    tree: kdtree.KdTree
+    normals: cl.Buffer  # float4 per triangle corner
+    uvs: cl.Buffer  # float2 per triangle corner
+    material_ids: cl.Buffer  # int per triangle
+    materials: cl.Buffer  # Material rows
+    lights: cl.Buffer  # Light rows
+    light_count: int
+    emit_tris: cl.Buffer  # emissive triangle ids
+    emit_cdf: cl.Buffer
+    emit_count: int
+    atlas: cl.Buffer  # float4 texels
+    texture_infos: cl.Buffer
+    camera: cl.Buffer  # one Camera row
+    world: np.ndarray  # float4: rgb radiance, w = 1 for a transparent film (set per render)
+
+    def kernel_args(self, transparent: bool = False) -> list:
+        """Arguments matching SCENE_PARAMS in shading/scene.h, in order."""
+        world = self.world.copy()
+        world[3] = 1.0 if transparent else 0.0
+        return [*self.tree.kernel_args(), self.normals, self.uvs, self.material_ids, self.materials, self.atlas,
+                self.texture_infos, self.lights, np.int32(self.light_count), self.emit_tris, self.emit_cdf,
+                np.int32(self.emit_count), self.camera, world]
+
+
+def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuffers | None = None,
+           changed=PARTS, timer: StageTimer | None = None) -> SceneBuffers:
+    """The device copy of a validated ``scene`` whose ``tables`` are built;
+    the buffers of ``previous`` stay where no part they hold is in
+    ``changed`` (the plan says which). The kd-tree build is timed as
+    "kdtree", the rest as "upload"."""
+    timer = timer or StageTimer()
+    moved = previous is None or not np.array_equal(tables.center, previous.center)
+    changed = set(PARTS) if moved else set(changed)
+    old = previous if not moved else None
+    if old is None or "geometry" in changed:
+        with timer.stage("kdtree"):
+            tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32))
+        with timer.stage("upload"):
+            geometry = (tree, device.to_device(float4_rows(scene.normals.reshape(-1, 3))),
+                        device.to_device(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),
+                        device.to_device(scene.material_ids))
+    else:
+        geometry = (old.tree, old.normals, old.uvs, old.material_ids)
+    with timer.stage("upload"):
+        if old is None or changed & {"geometry", "materials"}:
+            emitters = (device.to_device(tables.emit_tris), device.to_device(tables.emit_cdf), len(tables.emit_tris))
+        else:
+            emitters = (old.emit_tris, old.emit_cdf, old.emit_count)
+        if old is None or "materials" in changed:
+            materials = (device.to_device(tables.materials), device.to_device(tables.atlas),
+                         device.to_device(tables.texture_infos))
+        else:
+            materials = (old.materials, old.atlas, old.texture_infos)
+        if old is None or changed & {"lights", "geometry", "materials"}:
+            lights = (device.to_device(tables.lights), len(tables.lights))
+        else:
+            lights = (old.lights, old.light_count)
+        camera = device.to_device(tables.camera) if old is None or "camera" in changed else old.camera
+    return SceneBuffers(
+        device=device, center=tables.center, radius=tables.radius, tree=geometry[0], normals=geometry[1],
+        uvs=geometry[2], material_ids=geometry[3], materials=materials[0], lights=lights[0], light_count=lights[1],
+        emit_tris=emitters[0], emit_cdf=emitters[1], emit_count=emitters[2], atlas=materials[1],
+        texture_infos=materials[2], camera=camera, world=np.append(scene.world_color, 0.0).astype(np.float32))

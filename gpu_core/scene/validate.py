@@ -1,0 +1,181 @@
+"""Validation of a scene on entry: what cannot be rendered is dropped or
+repaired, counted and described, never raised (but for a camera that cannot
+make an image)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import SceneError
+from .model import Camera, Lights, Materials, Scene, ValidationReport
+
+
+def validate(scene: Scene) -> Scene:
+    """Check and repair a scene in place-free fashion; returns a new Scene.
+
+    Triangles with non-finite coordinates or zero area are dropped; material
+    ids out of range point at an added default material; non-finite or zero
+    corner normals are replaced by the face normal; lights with negative or
+    non-finite power or position are dropped. Every repair is counted in
+    ``scene.report`` and described in ``scene.warnings``. A camera that cannot
+    produce an image raises SceneError.
+    """
+    report = ValidationReport()
+    warnings = list(scene.warnings)
+    _check_camera(scene.camera)
+    tris, normals, uvs, mat_ids, cross = _valid_triangles(scene, report)
+    materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, report)
+    normals = _repaired_normals(normals, cross, report)
+    uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
+    materials, repaired = _finite_materials(materials)
+    report.repaired_materials = len(repaired)
+    if repaired:
+        warnings.append(f"material(s) with NaN/Inf or negative values repaired with defaults: {', '.join(repaired)}")
+    lights = _valid_lights(scene.lights, report, warnings)
+    warnings += _geometry_warnings(report)
+    world = np.asarray(scene.world_color, np.float32).reshape(3)
+    if not np.isfinite(world).all() or (world < 0).any():
+        warnings.append("world colour was negative or not finite; used black")
+        world = np.zeros(3, np.float32)
+    report.messages = warnings
+    return Scene(triangles=tris, normals=normals.astype(np.float32), uvs=uvs, material_ids=mat_ids.astype(np.int32),
+                 materials=materials, lights=lights, camera=scene.camera, world_color=world,
+                 textures=list(scene.textures), warnings=warnings, report=report)
+
+
+def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
+    """The triangles with finite corners and some area, with their normals,
+    uvs, material ids and (unnormalised) face normals."""
+    tris = np.asarray(scene.triangles, dtype=np.float64).reshape(-1, 3, 3)
+    n = len(tris)
+    normals = _shaped(scene.normals, (n, 3, 3), np.float32)
+    uvs = _shaped(scene.uvs, (n, 3, 2), np.float32)
+    mat_ids = _shaped(scene.material_ids, (n,), np.int32)
+    finite = np.isfinite(tris).all(axis=(1, 2))
+    report.dropped_nonfinite_triangles = int((~finite).sum())
+    with np.errstate(invalid="ignore", over="ignore"):
+        cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        area2 = np.linalg.norm(cross, axis=1)
+        longest = np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2).max(axis=1)
+        extent = np.abs(tris).max(axis=(1, 2))
+        # zero area: a sliver thinner than 1e-12 of its length, or a cross
+        # product no larger than the rounding of coordinates this far out
+        noise = 64.0 * np.finfo(np.float64).eps * extent * longest
+        degenerate = finite & ~(area2 > np.maximum(1e-12 * np.square(longest), noise))
+    report.dropped_degenerate_triangles = int(degenerate.sum())
+    keep = finite & ~degenerate
+    return tris[keep], normals[keep], uvs[keep], mat_ids[keep], cross[keep]
+
+
+def _valid_material_ids(materials: Materials, mat_ids: np.ndarray, report: ValidationReport):
+    """Material ids out of range point at an added default material."""
+    bad_ids = (mat_ids < 0) | (mat_ids >= len(materials))
+    report.repaired_material_ids = int(bad_ids.sum())
+    if report.repaired_material_ids:
+        materials = _with_default_material(materials)
+        mat_ids = np.where(bad_ids, len(materials) - 1, mat_ids).astype(np.int32)
+    return materials, mat_ids
+
+
+def _repaired_normals(normals: np.ndarray, cross: np.ndarray, report: ValidationReport) -> np.ndarray:
+    """Unit corner normals; non-finite or zero ones become the face normal."""
+    face_n = (cross / np.linalg.norm(cross, axis=1, keepdims=True)).astype(np.float32)
+    normals64 = normals.astype(np.float64)  # float32 squares overflow above ~1e19
+    with np.errstate(invalid="ignore", over="ignore"):
+        length = np.linalg.norm(normals64, axis=2)
+    bad_normals = ~(np.isfinite(normals64).all(axis=2) & (length > 1e-12))
+    report.repaired_normals = int(bad_normals.any(axis=1).sum())
+    with np.errstate(invalid="ignore"):
+        scaled = normals64 / np.where(bad_normals, 1.0, length)[..., None]
+        return np.where(bad_normals[..., None], face_n[:, None, :], scaled)
+
+
+def _valid_lights(lights: Lights, report: ValidationReport, warnings: list[str]) -> Lights:
+    """The lights with finite, non-negative power and finite shape values."""
+    good = np.isfinite(lights.power).all(axis=1) & (lights.power >= 0).all(axis=1)
+    for name in ("position", "direction", "axis_u", "axis_v", "radius", "spot_angle", "spot_blend", "sun_angle"):
+        values = getattr(lights, name)
+        good &= np.isfinite(values).all(axis=tuple(range(1, values.ndim)))
+    report.dropped_lights = int((~good).sum())
+    if not report.dropped_lights:
+        return lights
+    names = [nm for nm, g in zip(lights.names, good) if not g]
+    warnings.append(f"dropped {report.dropped_lights} light(s) with negative or invalid power/position: "
+                    f"{', '.join(names) or 'unnamed'}")
+    return lights.subset(good)
+
+
+def _geometry_warnings(report: ValidationReport) -> list[str]:
+    """What the triangle repairs were, in words."""
+    counts = [
+        (report.dropped_nonfinite_triangles, "dropped {} triangle(s) with NaN/Inf coordinates"),
+        (report.dropped_degenerate_triangles, "dropped {} zero-area triangle(s)"),
+        (report.repaired_material_ids, "{} triangle(s) had a material index out of range; used the default material"),
+        (report.repaired_normals, "{} triangle(s) had invalid normals; used face normals"),
+    ]
+    return [text.format(count) for count, text in counts if count]
+
+
+def _shaped(array, shape, dtype) -> np.ndarray:
+    """``array`` as ``dtype`` with ``shape``; zeros if it is missing."""
+    if array is None:
+        return np.zeros(shape, dtype)
+    out = np.asarray(array, dtype=dtype)
+    if out.shape != shape:
+        raise SceneError(f"scene array has shape {out.shape}, expected {shape}")
+    return out
+
+
+_MATERIAL_FIELDS = "base_color metallic roughness transmission ior emission alpha texture_id".split()
+
+
+def _finite_materials(materials: Materials) -> tuple[Materials, list[str]]:
+    """Materials with NaN/Inf values set to the defaults and negative emission to 0,
+    and the names of the rows that changed (the input itself if none did)."""
+    default = Materials.make([{}])
+    columns, changed = {}, np.zeros(len(materials), bool)
+    for name in _MATERIAL_FIELDS:
+        values = np.asarray(getattr(materials, name))
+        bad = ~np.isfinite(values) if values.dtype.kind == "f" else np.zeros(values.shape, bool)
+        if name == "emission":
+            bad |= np.isfinite(values) & (values < 0)
+            fixed = np.where(bad, 0.0, values).astype(values.dtype)
+        else:
+            fixed = np.where(bad, getattr(default, name)[0], values).astype(values.dtype)
+        changed |= bad.reshape(len(values), -1).any(axis=1)
+        columns[name] = fixed
+    if not changed.any():
+        return materials, []
+    names = [materials.names[i] if i < len(materials.names) and materials.names[i] else f"#{i}" for i in np.nonzero(changed)[0]]
+    return Materials(**columns, names=list(materials.names)), names
+
+
+def _with_default_material(materials: Materials) -> Materials:
+    default = Materials.make([{"name": "gpugi-default"}])
+    return Materials(
+        **{
+            name: np.concatenate([getattr(materials, name), getattr(default, name)])
+            for name in _MATERIAL_FIELDS
+        },
+        names=list(materials.names) + default.names,
+    )
+
+
+def _check_camera(camera: Camera) -> None:
+    m = np.asarray(camera.matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise SceneError("camera matrix is not a finite 4x4 matrix")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-20:
+        raise SceneError("camera matrix is singular (zero scale?)")
+    if camera.width < 1 or camera.height < 1:
+        raise SceneError(f"image size {camera.width}x{camera.height} is empty")
+    x0, x1, y0, y1 = camera.window
+    if not (np.isfinite(camera.window).all() and x1 > x0 and y1 > y0):
+        raise SceneError(f"camera window {camera.window} is empty or not finite")
+    bx0, by0, bx1, by1 = camera.pixel_window
+    if not (0 <= bx0 < bx1 <= camera.width and 0 <= by0 < by1 <= camera.height):
+        raise SceneError(f"render border {camera.pixel_window} lies outside the {camera.width}x{camera.height} image")
+    if not (0 <= camera.clip_start < camera.clip_end):
+        raise SceneError(f"camera clipping {camera.clip_start}..{camera.clip_end} is empty")
+
+

@@ -1,0 +1,25 @@
+/* Image textures: bilinear lookups with repeat wrap in the shared atlas. */
+#ifndef GPUGI_TEXTURE_H
+#define GPUGI_TEXTURE_H
+#include "device/structs.h"
+
+inline float4 Texture_texel(const __global float4 *atlas, TextureInfo t, int x, int y) {
+    x = ((x % t.width) + t.width) % t.width;
+    y = ((y % t.height) + t.height) % t.height;
+    return atlas[t.offset + y * t.width + x];
+}
+
+/* Bilinear sample at uv (v = 0 is the bottom row, as Blender stores images). */
+inline float4 Texture_sample(const __global float4 *atlas, const __global TextureInfo *infos, int id, float2 uv) {
+    TextureInfo t = infos[id];
+    /* wrap uv into [0, 1) first, so huge coordinates stay in integer range */
+    float2 w = uv - floor(uv);
+    float fx = w.x * t.width - 0.5f, fy = w.y * t.height - 0.5f;
+    int x0 = (int)floor(fx), y0 = (int)floor(fy);
+    float ax = fx - x0, ay = fy - y0;
+    float4 a = mix(Texture_texel(atlas, t, x0, y0), Texture_texel(atlas, t, x0 + 1, y0), ax);
+    float4 b = mix(Texture_texel(atlas, t, x0, y0 + 1), Texture_texel(atlas, t, x0 + 1, y0 + 1), ax);
+    return mix(a, b, ay);
+}
+
+#endif

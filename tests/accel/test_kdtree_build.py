@@ -1,0 +1,315 @@
+"""Invariants of built kd-trees, read back from the device.
+
+The node array is walked on the host from the root box down through the
+split planes: the preorder layout must be a tree that reaches every node
+once, every plane must lie inside its node's cell, every triangle that
+reaches into a leaf's cell must be listed in that leaf, and ``stats`` must
+agree with what the walk counts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyopencl import cltypes
+
+from gpu_core.accel import kdtree
+from gpu_core.accel.kdtree_build import COST_TRAVERSE, SAH_GROUP, SMALL, build_tree, depth_limit
+
+MARGIN = 1e-5  # leaf cells shrink by this fraction of the scene size before the overlap test
+
+
+# ---- scenes -------------------------------------------------------------------------------
+
+
+def random_soup(n, seed=0, size=0.05):
+    """``n`` random triangles of about ``size`` in the unit cube."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((n, 1, 3))
+    return (centres + size * rng.standard_normal((n, 3, 3))).astype(np.float32)
+
+
+def sphere(rings=40, segments=60):
+    """A closed UV sphere of radius 1 (2 * rings * segments triangles, some degenerate at the poles)."""
+    theta = np.linspace(0.0, np.pi, rings + 1)
+    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    pts = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
+    a, b = pts[:-1, :-1], pts[:-1, 1:]
+    c, d = pts[1:, :-1], pts[1:, 1:]
+    return np.concatenate([np.stack([a, c, d], -2), np.stack([a, d, b], -2)]).reshape(-1, 3, 3).astype(np.float32)
+
+
+def box_grid(k=6):
+    """Axis-aligned cubes on a grid: many triangles lying exactly in candidate planes."""
+    faces = []
+    for axis in range(3):
+        u, v = (axis + 1) % 3, (axis + 2) % 3
+        for side in (0.0, 1.0):
+            quad = np.zeros((4, 3))
+            quad[:, axis] = side
+            quad[:, u] = [0, 1, 1, 0]
+            quad[:, v] = [0, 0, 1, 1]
+            faces += [quad[[0, 1, 2]], quad[[0, 2, 3]]]
+    cube = np.array(faces) * 0.6
+    offsets = np.stack(np.meshgrid(*[np.arange(k)] * 3, indexing="ij"), -1).reshape(-1, 1, 1, 3)
+    return (cube[None] + offsets).reshape(-1, 3, 3).astype(np.float32)
+
+
+def big_and_small():
+    """A few large triangles across the scene among many small ones (clipping in the large stage)."""
+    rng = np.random.default_rng(3)
+    big = (rng.random((8, 3, 3)) * 2.0 - 0.5).astype(np.float32)
+    return np.concatenate([big, random_soup(1500, seed=4, size=0.02)])
+
+
+SCENES = {
+    "random_soup": lambda: random_soup(2000),
+    "sphere": sphere,
+    "box_grid": box_grid,
+    "big_and_small": big_and_small,
+    "few_triangles": lambda: random_soup(40, seed=5),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(SCENES))
+def built(request, device):
+    tris = SCENES[request.param]()
+    return tris, kdtree.build(device, tris)
+
+
+# ---- host walk of the node array ----------------------------------------------------------
+
+
+def walk(tree):
+    """Visit the tree from the root cell: per node its cell, depth and how often it was reached.
+
+    Raises AssertionError on a child index out of range or on a cycle.
+    """
+    nodes, _ = tree.nodes_host()
+    n = len(nodes)
+    lo = np.zeros((n, 3))
+    hi = np.zeros((n, 3))
+    depth = np.zeros(n, int)
+    reached = np.zeros(n, int)
+    stack = [(0, tree.bmin[:3].astype(np.float64), tree.bmax[:3].astype(np.float64), 0)]
+    while stack:
+        i, cell_lo, cell_hi, d = stack.pop()
+        assert 0 <= i < n, f"child index {i} outside the {n} nodes"
+        reached[i] += 1
+        assert reached[i] == 1, f"node {i} reached twice"
+        lo[i], hi[i], depth[i] = cell_lo, cell_hi, d
+        node = nodes[i]
+        if node["axis"] == kdtree.LEAF:
+            continue
+        axis, split = int(node["axis"]), float(node["split"])
+        assert axis in (0, 1, 2), f"node {i} has axis {axis}"
+        left_hi, right_lo = cell_hi.copy(), cell_lo.copy()
+        left_hi[axis] = right_lo[axis] = split
+        stack.append((int(node["child"]), right_lo, cell_hi, d + 1))
+        stack.append((i + 1, cell_lo, left_hi, d + 1))
+    return nodes, lo, hi, depth, reached
+
+
+def triangle_box_overlap(tris, lo, hi):
+    """Whether each triangle meets the open box ``(lo, hi)`` (separating-axis test, float64).
+
+    ``tris`` (M, 3, 3), ``lo`` and ``hi`` (M, 3): one triangle and one box per row.
+    """
+    centre = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo)
+    v = tris.astype(np.float64) - centre[:, None, :]
+    edges = v[:, [1, 2, 0]] - v
+    normal = np.cross(edges[:, 0], edges[:, 1])
+    unit = np.eye(3)
+    axes = [np.broadcast_to(unit[a], normal.shape) for a in range(3)] + [normal]
+    axes += [np.cross(edges[:, e], unit[a]) for e in range(3) for a in range(3)]
+    overlap = np.ones(len(tris), bool)
+    for axis in axes:
+        p = np.einsum("mvk,mk->mv", v, axis)
+        r = (half * np.abs(axis)).sum(-1)
+        nonzero = np.abs(axis).sum(-1) > 0
+        separated = nonzero & ((p.min(-1) >= r) | (p.max(-1) <= -r))
+        overlap &= ~separated
+    return overlap
+
+
+def unlisted_overlaps(tris, nodes, leaf_tris, lo, hi, margin):
+    """(leaf, triangle) pairs where the triangle reaches into the leaf's cell but is not listed."""
+    leaves = np.flatnonzero(nodes["axis"] == kdtree.LEAF)
+    tri_lo, tri_hi = tris.min(axis=1), tris.max(axis=1)
+    missing = []
+    for leaf in leaves:
+        cell_lo, cell_hi = lo[leaf] + margin, hi[leaf] - margin
+        if np.any(cell_lo >= cell_hi):
+            continue  # thinner than the margin
+        near = np.flatnonzero(np.all((tri_lo < cell_hi) & (tri_hi > cell_lo), axis=1))
+        if len(near) == 0:
+            continue
+        boxes_lo = np.broadcast_to(cell_lo, (len(near), 3))
+        boxes_hi = np.broadcast_to(cell_hi, (len(near), 3))
+        inside = near[triangle_box_overlap(tris[near], boxes_lo, boxes_hi)]
+        start, count = int(nodes[leaf]["child"]), int(nodes[leaf]["count"])
+        listed = set(leaf_tris[start : start + count].tolist())
+        missing += [(int(leaf), int(t)) for t in inside if int(t) not in listed]
+    return missing
+
+
+def scene_margin(tree):
+    return MARGIN * float(np.max(tree.bmax[:3] - tree.bmin[:3]))
+
+
+# ---- tests ------------------------------------------------------------------------------
+
+
+def test_preorder_layout_reaches_every_node_once(built):
+    _, tree = built
+    nodes, _, _, _, reached = walk(tree)
+    assert len(nodes) == tree.stats["nodes"]
+    assert np.all(reached == 1), f"{int((reached == 0).sum())} node(s) never reached"
+    inner = np.flatnonzero(nodes["axis"] != kdtree.LEAF)
+    assert np.all(nodes["child"][inner] > inner + 1), "a right child does not come after its left subtree"
+
+
+def test_leaf_lists_are_in_range_and_hold_each_triangle_once(built):
+    tris, tree = built
+    nodes, leaf_tris = tree.nodes_host()
+    leaves = nodes[nodes["axis"] == kdtree.LEAF]
+    assert np.all(leaves["count"] >= 0)
+    assert np.all(leaves["child"] >= 0) and np.all(leaves["child"] + leaves["count"] <= len(leaf_tris))
+    for leaf in leaves:
+        listed = leaf_tris[leaf["child"] : leaf["child"] + leaf["count"]]
+        assert np.all((listed >= 0) & (listed < len(tris)))
+        assert len(np.unique(listed)) == len(listed), "a leaf lists a triangle twice"
+
+
+def test_split_planes_lie_inside_their_node_cell(built):
+    _, tree = built
+    nodes, lo, hi, _, _ = walk(tree)
+    inner = np.flatnonzero(nodes["axis"] != kdtree.LEAF)
+    axis = nodes["axis"][inner]
+    split = nodes["split"][inner].astype(np.float64)
+    cell_lo, cell_hi = lo[inner, axis], hi[inner, axis]
+    outside = ~((cell_lo < split) & (split < cell_hi))
+    bad = inner[outside]
+    assert not outside.any(), f"{len(bad)} plane(s) on or outside their cell, first at node {bad[:1]}"
+
+
+def test_every_triangle_reaching_into_a_leaf_cell_is_listed_there(built):
+    tris, tree = built
+    nodes, lo, hi, _, _ = walk(tree)
+    _, leaf_tris = tree.nodes_host()
+    missing = unlisted_overlaps(tris, nodes, leaf_tris, lo, hi, scene_margin(tree))
+    assert not missing, f"{len(missing)} (leaf, triangle) pairs missing, e.g. {missing[:5]}"
+
+
+def test_every_triangle_is_listed_in_a_leaf_holding_its_centroid(built):
+    # also covers triangles lying in a split plane, which reach into no open cell
+    tris, tree = built
+    nodes, lo, hi, _, _ = walk(tree)
+    _, leaf_tris = tree.nodes_host()
+    leaves = np.flatnonzero(nodes["axis"] == kdtree.LEAF)
+    centroid = tris.astype(np.float64).mean(axis=1)
+    holds = np.all((lo[leaves, None] <= centroid) & (centroid <= hi[leaves, None]), axis=-1)
+    listed = np.zeros_like(holds)
+    for row, leaf in enumerate(leaves):
+        start, count = int(nodes[leaf]["child"]), int(nodes[leaf]["count"])
+        listed[row, leaf_tris[start : start + count]] = True
+    orphans = np.flatnonzero(~(holds & listed).any(axis=0))
+    assert len(orphans) == 0, f"{len(orphans)} triangle(s) in no leaf around their centroid, e.g. {orphans[:5]}"
+
+
+def test_overlap_check_finds_a_triangle_removed_from_its_leaf(device):
+    tris = random_soup(300, seed=7)
+    tree = kdtree.build(device, tris)
+    nodes, lo, hi, _, _ = walk(tree)
+    _, leaf_tris = tree.nodes_host()
+    leaf = np.flatnonzero((nodes["axis"] == kdtree.LEAF) & (nodes["count"] > 0))[0]
+    damaged = leaf_tris.copy()
+    damaged[nodes[leaf]["child"]] = -1
+    missing = unlisted_overlaps(tris, nodes, damaged, lo, hi, scene_margin(tree))
+    assert (int(leaf), int(leaf_tris[nodes[leaf]["child"]])) in missing
+
+
+def test_overlap_oracle_on_simple_cases():
+    box_lo, box_hi = np.zeros((1, 3)), np.ones((1, 3))
+    across = np.array([[[-1, 0.5, 0.5], [2, 0.5, 0.5], [0.5, 2, 0.5]]])
+    beside = np.array([[[1.5, 0, 0], [3, 0, 0], [1.5, 1, 1]]])
+    on_face = np.array([[[1, 0, 0], [1, 1, 0], [1, 0, 1]]])  # in the plane x = 1: not inside the open box
+    corner_cut = np.array([[[0.9, 1.5, 0.5], [1.5, 0.9, 0.5], [1.5, 1.5, 0.5]]])  # misses, though its box overlaps
+    expect = [True, False, False, False]
+    for tri, want in zip([across, beside, on_face, corner_cut], expect):
+        assert triangle_box_overlap(tri, box_lo, box_hi)[0] == want
+
+
+def test_stats_agree_with_the_node_array(built):
+    tris, tree = built
+    nodes, lo, hi, depth, _ = walk(tree)
+    stats = tree.stats
+    leaf = nodes["axis"] == kdtree.LEAF
+    counts = nodes["count"][leaf]
+    assert stats["nodes"] == len(nodes)
+    assert stats["leaves"] == int(leaf.sum())
+    assert stats["leaves"] == (len(nodes) + 1) // 2  # a full binary tree
+    assert stats["depth"] == int(depth.max())
+    assert stats["depth"] <= depth_limit(len(tris))
+    assert stats["leaf_references"] == int(counts.sum())
+    assert stats["max_leaf_size"] == int(counts.max())
+    assert stats["mean_leaf_size"] == pytest.approx(counts.mean())
+    assert stats["max_leaf_size"] >= stats["mean_leaf_size"]
+    assert stats["triangles"] == len(tris)
+
+
+def test_sah_cost_matches_the_cells_of_the_walk(built):
+    _, tree = built
+    nodes, lo, hi, _, _ = walk(tree)
+    d = hi - lo
+    area = 2.0 * (d[:, 0] * d[:, 1] + d[:, 1] * d[:, 2] + d[:, 2] * d[:, 0])
+    leaf = nodes["axis"] == kdtree.LEAF
+    cost = np.where(leaf, nodes["count"], COST_TRAVERSE) * area
+    assert tree.stats["sah_cost"] == pytest.approx(cost.sum() / area[0], rel=1e-3)
+
+
+def test_stats_time_every_build_stage(built):
+    _, tree = built
+    ms = tree.stats["ms"]
+    for stage in ("upload", "setup", "large", "small", "output", "total"):
+        assert ms[stage] >= 0.0, stage
+    stages = sum(v for k, v in ms.items() if k != "total")
+    assert ms["total"] >= stages * (1 - 1e-6)
+
+
+def test_large_scenes_pass_through_both_stages(device):
+    tris = random_soup(5000, seed=1, size=0.01)
+    stats = kdtree.build(device, tris).stats
+    assert stats["large_levels"] >= 1
+    assert stats["small_roots"] >= len(tris) // SMALL
+    assert stats["small_levels"] >= 1
+
+
+def test_small_scenes_skip_the_large_stage(device):
+    stats = kdtree.build(device, random_soup(SMALL, seed=2)).stats
+    assert stats["large_levels"] == 0
+    assert stats["small_roots"] == 1
+
+
+def test_leaves_stay_small_where_triangles_are_separable(device):
+    # well-separated tiny triangles: the SAH should isolate them in few-triangle leaves
+    tris = random_soup(4000, seed=6, size=0.001)
+    stats = kdtree.build(device, tris).stats
+    assert stats["mean_leaf_size"] <= 4.0
+    assert stats["leaf_references"] <= 2 * len(tris)
+
+
+@pytest.mark.parametrize("lanes", [8, SAH_GROUP])
+def test_sah_search_makes_the_same_tree_with_any_lane_count(device, lanes):
+    # the CPU searches a node's candidates in one work-item, a GPU in a work-group
+    tris = box_grid(4).reshape(-1, 3)
+    verts = np.zeros((len(tris), 4), np.float32)
+    verts[:, :3] = tris
+    verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
+    reference = build_tree(device, verts_dev, len(tris) // 3, sah_lanes=1)
+    other = build_tree(device, verts_dev, len(tris) // 3, sah_lanes=lanes)
+    assert np.array_equal(other.nodes.get(), reference.nodes.get())
+    used = reference.stats["leaf_references"]
+    assert np.array_equal(other.leaf_tris.get()[:used], reference.leaf_tris.get()[:used])

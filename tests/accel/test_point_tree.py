@@ -1,0 +1,145 @@
+"""Point kd-tree of the photon maps: kNN against brute force, node payloads,
+density estimation against analytic irradiance."""
+
+import numpy as np
+import pytest
+
+from layout_probe import host_layout, probe
+from gpu_core.accel.point_tree import PointTree
+
+
+def brute_knn(points, queries, k, max_radius=None):
+    """Squared distances of the k nearest points (float64), padded with inf."""
+    d2 = ((queries[:, None, :].astype(np.float64) - points[None, :, :].astype(np.float64)) ** 2).sum(-1)
+    if max_radius is not None:
+        d2[d2 > max_radius**2] = np.inf
+    d2 = np.sort(d2, axis=1)[:, :k]
+    return np.pad(d2, ((0, 0), (0, k - d2.shape[1])), constant_values=np.inf)
+
+
+def check_knn(tree, points, queries, k, max_radius=None):
+    """Distances equal brute force; indices point at points at those distances."""
+    idx, d2 = tree.knn(queries, k, max_radius)
+    want = brute_knn(points, queries, k, max_radius)
+    assert idx.shape == d2.shape == (len(queries), k)
+    found = idx >= 0
+    assert np.array_equal(found, np.isfinite(want))
+    np.testing.assert_allclose(d2[found], want[found], rtol=1e-5, atol=1e-9)
+    assert np.all(np.isinf(d2[~found]))
+    # each index is a real point at the reported distance, none repeated in a row
+    rows = np.nonzero(found)[0]
+    real = ((points[idx[found]].astype(np.float64) - queries[rows].astype(np.float64)) ** 2).sum(-1)
+    np.testing.assert_allclose(real, d2[found], rtol=1e-5, atol=1e-9)
+    for row in idx:
+        kept = row[row >= 0]
+        assert len(np.unique(kept)) == len(kept)
+
+
+RNG = np.random.default_rng(7)
+CLOUDS = {
+    "uniform": RNG.random((4000, 3)),
+    "clustered": np.concatenate([RNG.normal(c, 0.003, (300, 3)) for c in RNG.random((8, 3))]),
+    "duplicated": np.repeat(RNG.random((60, 3)), 40, axis=0),
+    "planar": np.c_[RNG.random((3000, 2)), np.zeros(3000)],
+    "identical": np.full((500, 3), 0.25),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CLOUDS))
+def test_knn_matches_brute_force(device, name):
+    points = CLOUDS[name].astype(np.float32)
+    tree = PointTree.build(device, points)
+    queries = np.concatenate([RNG.random((150, 3)), points[:50]]).astype(np.float32)
+    for k in (1, 8, 50):
+        check_knn(tree, points, queries, k)
+
+
+def test_knn_within_a_radius(device):
+    points = CLOUDS["uniform"].astype(np.float32)
+    tree = PointTree.build(device, points)
+    check_knn(tree, points, RNG.random((200, 3)).astype(np.float32), 30, max_radius=0.05)
+
+
+def test_k_larger_than_the_point_count_pads_the_rows(device):
+    points = RNG.random((7, 3)).astype(np.float32)
+    tree = PointTree.build(device, points)
+    queries = RNG.random((20, 3)).astype(np.float32)
+    idx, d2 = tree.knn(queries, 12)
+    assert np.all(idx[:, 7:] == -1) and np.all(np.isinf(d2[:, 7:]))
+    assert sorted(idx[0, :7]) == list(range(7))
+    check_knn(tree, points, queries, 12)
+
+
+def test_empty_tree_finds_nothing(device):
+    tree = PointTree.build(device, np.zeros((0, 3), np.float32))
+    idx, d2 = tree.knn(np.zeros((5, 3), np.float32), 4)
+    assert np.all(idx == -1) and np.all(np.isinf(d2))
+
+
+def test_queries_far_outside_the_points(device):
+    points = RNG.random((2000, 3)).astype(np.float32)
+    tree = PointTree.build(device, points)
+    queries = np.array([[1e4, 0, 0], [-3e3, 2e3, 5e2], [0.5, 0.5, -1e5]], np.float32)
+    check_knn(tree, points, queries, 20)
+
+
+def test_bad_arguments_raise(device):
+    tree = PointTree.build(device, RNG.random((10, 3)).astype(np.float32))
+    with pytest.raises(ValueError):
+        tree.knn(np.zeros((1, 3), np.float32), 0)
+    with pytest.raises(ValueError):
+        PointTree.build(device, np.array([[0, 0, np.nan]], np.float32))
+
+
+def test_node_payloads_sum_their_photons(device):
+    n = 3000
+    points = RNG.random((n, 3)).astype(np.float32)
+    power = RNG.random((n, 3)).astype(np.float32)
+    up = np.tile([0.0, 0.0, 1.0], (n, 1)).astype(np.float32)
+    tree = PointTree.build(device, points, power=power, directions=up, normals=up)
+    info = tree.node_info()
+    order = tree.leaf_order()
+    assert sorted(order) == list(range(n))
+    root = info[0]
+    assert root["count"] == n and root["depth"] == 0
+    np.testing.assert_allclose(root["power"][:3], power.sum(0), rtol=1e-4)
+    np.testing.assert_allclose(root["lo"][:3], points.min(0))
+    np.testing.assert_allclose(root["normal"][:3], [0, 0, 1], atol=1e-6)
+    # every node: its photons are [first, first + count) of the leaf order
+    for node in info[:: max(1, len(info) // 200)]:
+        if node["count"] == 0:  # the empty side of an empty-space cut
+            continue
+        mine = order[node["first"] : node["first"] + node["count"]]
+        np.testing.assert_allclose(node["power"][:3], power[mine].sum(0), rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(node["lo"][:3], points[mine].min(0))
+        np.testing.assert_allclose(node["hi"][:3], points[mine].max(0))
+        # E~_p = sum (w_i . n_p) Phi_i / r_p^2, all photons arriving along n_p here
+        r_p = node["lo"][3]
+        np.testing.assert_allclose(node["irradiance"][:3], power[mine].sum(0) / r_p**2, rtol=1e-4)
+
+
+@pytest.mark.parametrize("filter", ["box", "cone", "epanechnikov"])
+def test_density_estimate_of_a_uniform_flux(device, filter):
+    """Photons of equal power spread evenly on the unit square: E = total power."""
+    n = 40000
+    points = np.c_[RNG.random((n, 2)), np.zeros(n)].astype(np.float32)
+    power = np.full((n, 3), 2.0 / n, np.float32)
+    up = np.tile([0.0, 0.0, 1.0], (n, 1)).astype(np.float32)
+    tree = PointTree.build(device, points, power=power, directions=up, normals=up)
+    queries = np.c_[0.2 + 0.6 * RNG.random((400, 2)), np.zeros(400)].astype(np.float32)
+    normals = np.tile([0.0, 0.0, 1.0], (400, 1))
+    e = tree.irradiance(queries, normals, k=100, filter=filter)
+    assert abs(e.mean() - 2.0) < 0.05 * 2.0
+    # photons arriving from behind the surface do not count
+    assert np.all(tree.irradiance(queries, -normals, k=100, filter=filter) == 0)
+    radiance = tree.radiance(queries, normals, np.full((400, 3), 0.5), k=100, filter=filter)
+    np.testing.assert_allclose(radiance, e * 0.5 / np.pi, rtol=1e-5)
+
+
+def test_struct_twins_match_the_device_layout(device):
+    rows = host_layout()
+    out = probe(device, len(rows) + 2)
+    ours = {"PointNode", "BuildNode", "Chunk", "BuildSums", "PhotonEmitter"}
+    host = [row for row in rows if row[0] in ours]
+    assert [(s, f, int(v)) for (s, f, _), v in zip(rows, out) if s in ours] == host
+    assert out[-1] == -1  # the probe reports nothing more

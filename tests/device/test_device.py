@@ -1,0 +1,193 @@
+"""Device choice, fallback and kernel programs: built once, cached on disk, clear errors."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from conftest import ROOT
+
+import gpu_core.device.programs as programs_module
+from gpu_core.device import get_device, list_devices, load_source
+from gpu_core.errors import DeviceError
+
+POCL = "portable computing language"
+
+_KERNEL = """
+#include "probe.h"
+/* out[i] = Probe_value(i) */
+__kernel void Probe_fill(__global float *out) {
+    int i = get_global_id(0);
+    out[i] = Probe_value(i);
+}
+"""
+_HEADER = "inline float Probe_value(int i) { return %s; }\n"
+
+# a second process: builds probe.cl from the folder argv[1], runs it, prints what happened
+_PROBE = """
+import json, sys, pathlib
+import numpy as np, pyopencl as cl
+import gpu_core.device.programs as programs_module
+from gpu_core.device import get_device
+programs_module.INCLUDE_ROOT = pathlib.Path(sys.argv[1])
+dev = get_device()
+program = dev.program("probe.cl")
+out = np.zeros(4, np.float32)
+buf = dev.empty(out.nbytes)
+program.Probe_fill(dev.queue, out.shape, None, buf)
+cl.enqueue_copy(dev.queue, out, buf)
+print(json.dumps({"from_cache": [b.from_cache for b in dev.builds], "values": out.tolist()}))
+"""
+
+
+def _kernel_dir(path, expression="2.0f * (float)i + 1.0f", kernel=_KERNEL):
+    """A kernel folder holding probe.cl and the probe.h it includes."""
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "probe.cl").write_text(kernel)
+    (path / "probe.h").write_text(_HEADER % expression)
+    return path
+
+
+def _run_probe(kernels, cache):
+    """Run _PROBE in a fresh process with its own kernel cache folder."""
+    env = dict(os.environ, GPUGI_KERNEL_CACHE=str(cache))
+    env.pop("GPUGI_DEVICE", None)
+    out = subprocess.run([sys.executable, "-c", _PROBE, str(kernels)], cwd=ROOT, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# -- device choice ------------------------------------------------------------------
+
+
+def test_default_device_is_the_pocl_cpu_device(monkeypatch):
+    monkeypatch.delenv("GPUGI_DEVICE", raising=False)
+    dev = get_device()
+    assert dev.is_cpu
+    assert POCL in dev.device.platform.name.lower()
+    assert dev.fallback_message == ""
+    assert dev is get_device()  # one device per process
+
+
+def test_gpugi_device_naming_a_missing_platform_falls_back_to_cpu(monkeypatch):
+    monkeypatch.setenv("GPUGI_DEVICE", "no-such-platform-anywhere")
+    dev = get_device()
+    assert dev.is_cpu
+    assert POCL in dev.device.platform.name.lower()
+    assert "'no-such-platform-anywhere'" in dev.fallback_message
+    assert "not found" in dev.fallback_message
+    assert "Portable Computing Language" in dev.fallback_message  # what it uses instead
+
+
+def test_missing_device_number_on_a_present_platform_falls_back_with_a_message():
+    dev = get_device("Portable:99")
+    assert dev.is_cpu
+    assert "'Portable:99'" in dev.fallback_message
+
+
+def test_gpugi_device_picks_a_present_device_without_a_message(monkeypatch):
+    monkeypatch.setenv("GPUGI_DEVICE", "Portable:0")
+    dev = get_device()
+    assert dev.is_cpu and dev.fallback_message == ""
+
+
+def test_an_explicit_device_argument_wins_over_the_environment(monkeypatch):
+    monkeypatch.setenv("GPUGI_DEVICE", "no-such-platform-anywhere")
+    assert get_device("cpu").fallback_message == ""
+
+
+def test_list_devices_lists_the_cpu_device_and_its_spec_selects_it(device):
+    lines = list_devices()
+    cpu_lines = [line for line in lines if POCL in line.lower()]
+    assert cpu_lines, lines
+    assert any(device.device.name.strip() in line for line in cpu_lines)
+    spec = cpu_lines[0].split()[0]  # "P:D"
+    chosen = get_device(spec)
+    assert chosen.fallback_message == ""
+    assert chosen.device.int_ptr == device.device.int_ptr
+
+
+# -- programs and the disk cache ----------------------------------------------------
+
+
+def test_program_is_built_once_per_process_and_per_define_set(device, tmp_path, monkeypatch):
+    kernels = _kernel_dir(tmp_path / "kernels")
+    (kernels / "probe_once.cl").write_text(_KERNEL)
+    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", kernels)
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+    before = len(device.builds)
+    first = device.program("probe_once.cl")
+    assert device.program("probe_once.cl") is first
+    assert len(device.builds) == before + 1
+    assert device.builds[-1].name == "probe_once.cl" and not device.builds[-1].from_cache
+    other = device.program("probe_once.cl", {"PROBE_UNUSED": 1})
+    assert other is not first and len(device.builds) == before + 2
+    assert len(list((tmp_path / "cache").glob("probe_once-*.bin"))) == 2
+
+
+def test_second_process_loads_the_program_from_the_disk_cache(tmp_path):
+    kernels = _kernel_dir(tmp_path / "kernels")
+    cache = tmp_path / "cache"
+    first = _run_probe(kernels, cache)
+    second = _run_probe(kernels, cache)
+    assert first == {"from_cache": [False], "values": [1.0, 3.0, 5.0, 7.0]}
+    assert second == {"from_cache": [True], "values": [1.0, 3.0, 5.0, 7.0]}
+    assert len(list(cache.glob("probe-*.bin"))) == 1
+
+
+def test_editing_an_included_header_invalidates_the_cached_program(tmp_path):
+    kernels = _kernel_dir(tmp_path / "kernels")
+    cache = tmp_path / "cache"
+    assert _run_probe(kernels, cache)["from_cache"] == [False]
+    _kernel_dir(kernels, expression="(float)(i * i)")
+    edited = _run_probe(kernels, cache)
+    assert edited == {"from_cache": [False], "values": [0.0, 1.0, 4.0, 9.0]}
+    assert len(list(cache.glob("probe-*.bin"))) == 2
+
+
+@pytest.mark.parametrize("damage", [b"", b"\x7fELF not a program binary" * 40], ids=["empty", "garbage"])
+def test_damaged_cache_file_is_rebuilt_and_replaced(tmp_path, damage):
+    kernels = _kernel_dir(tmp_path / "kernels")
+    cache = tmp_path / "cache"
+    _run_probe(kernels, cache)
+    (binary,) = cache.glob("probe-*.bin")
+    binary.write_bytes(damage)
+    rebuilt = _run_probe(kernels, cache)
+    assert rebuilt == {"from_cache": [False], "values": [1.0, 3.0, 5.0, 7.0]}
+    assert _run_probe(kernels, cache)["from_cache"] == [True]
+
+
+# -- errors -------------------------------------------------------------------------
+
+
+def test_missing_kernel_source_raises_device_error(device):
+    with pytest.raises(DeviceError, match="no_such_kernel.cl.*missing"):
+        device.program("no_such_kernel.cl")
+    with pytest.raises(DeviceError, match="missing"):
+        load_source("nope.h")
+
+
+def test_missing_included_header_raises_device_error_naming_it(device, tmp_path, monkeypatch):
+    (tmp_path / "needs_header.cl").write_text('#include "absent_header.h"\n__kernel void k(void) {}\n')
+    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", tmp_path)
+    with pytest.raises(DeviceError, match="absent_header.h"):
+        device.program("needs_header.cl")
+
+
+def test_kernel_that_does_not_compile_raises_device_error_naming_it(device, tmp_path, monkeypatch):
+    (tmp_path / "broken_probe.cl").write_text("__kernel void Broken_probe(__global float *out) { out[0] = ; }\n")
+    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", tmp_path)
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(DeviceError, match="broken_probe.cl.*failed to build"):
+        device.program("broken_probe.cl")
+
+
+def test_load_source_inlines_each_included_header_once(tmp_path, monkeypatch):
+    kernels = _kernel_dir(tmp_path)
+    (kernels / "twice.cl").write_text('#include "probe.h"\n#include "probe.h"\n__kernel void k(void) {}\n')
+    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", kernels)
+    probe = load_source("probe.cl")
+    assert "#include" not in probe and "inline float Probe_value" in probe and "Probe_fill" in probe
+    assert load_source("twice.cl").count("inline float Probe_value") == 1

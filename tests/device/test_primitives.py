@@ -1,0 +1,34 @@
+"""Device scan, stable radix sort and group-by-key (gpu_core/device/primitives.py)
+against numpy."""
+
+import numpy as np
+import pytest
+
+from gpu_core.device import primitives
+
+
+def read(device, buf, n, dtype=np.int32):
+    return device.to_host(buf, np.empty(n, dtype))
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 4096, 4097, 70000])
+def test_exclusive_scan_equals_numpy_cumsum(device, n):
+    values = np.random.default_rng(n).integers(0, 50, n).astype(np.int32)
+    buf = device.to_device(values, writable=True)
+    total = primitives.exclusive_scan_total(device, buf, n)
+    assert total == values.sum()
+    np.testing.assert_array_equal(read(device, buf, n), np.cumsum(values) - values)
+
+
+@pytest.mark.parametrize("n, key_count", [(0, 5), (1, 1), (300, 1), (300, 3), (5000, 16384), (40000, 1 << 21)])
+def test_grouping_equals_a_stable_numpy_sort(device, n, key_count):
+    keys = np.random.default_rng(key_count).integers(0, key_count, n).astype(np.uint32)
+    groups = primitives.group(device, device.to_device(keys), n, key_count)
+    order = read(device, groups.order, n)
+    np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
+    np.testing.assert_array_equal(read(device, groups.keys, n, np.uint32), np.sort(keys))
+    start, end = read(device, groups.start, key_count), read(device, groups.end, key_count)
+    counts = np.bincount(keys, minlength=key_count)
+    np.testing.assert_array_equal(end - start, counts)
+    filled = counts > 0
+    np.testing.assert_array_equal(start[filled], np.searchsorted(np.sort(keys), np.flatnonzero(filled)))

@@ -1,0 +1,142 @@
+"""The illumination cut of a photon tree: a valid cut, and irradiance from it
+that matches the photons' density."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gpu_core.accel.point_tree import PointTree
+from gpu_core.gi import cut
+
+UP = np.array([0.0, 0.0, 1.0], np.float32)
+
+
+def plane_photons(rng, n, irradiance, half=1.0, axis=2, offset=0.0):
+    """Photons spread evenly on the square [-half, half]^2 of the plane
+    x[axis] = offset, arriving along +axis, carrying the power that gives
+    ``irradiance``."""
+    pts = rng.uniform(-half, half, (n, 3)).astype(np.float32)
+    pts[:, axis] = offset
+    normal = np.zeros((n, 3), np.float32)
+    normal[:, axis] = 1.0
+    power = np.full((n, 3), irradiance * (2 * half) ** 2 / n, np.float32)
+    return pts, power, normal
+
+
+def build(device, pts, power, normal):
+    return PointTree.build(device, pts, power, normal, normal)
+
+
+def cut_is_valid(tree, chosen):
+    """Exactly one chosen node on every root-to-leaf path to photons (and at
+    most one on the paths to empty leaves, which the cut leaves out)."""
+    nodes = tree.nodes()
+    n = len(nodes)
+    on_path = np.zeros(n, np.int64)  # chosen nodes from the root down to each node
+    chosen_mask = np.zeros(n, bool)
+    chosen_mask[chosen] = True
+    on_path[0] = chosen_mask[0]
+    for i in range(n):
+        if nodes["axis"][i] != cut.LEAF:
+            for child in (i + 1, nodes["child"][i]):
+                on_path[child] = on_path[i] + chosen_mask[child]
+    leaves = nodes["axis"] == cut.LEAF
+    lit = tree.node_info()["count"] > 0
+    return bool((on_path[leaves & lit] == 1).all() and (on_path[leaves] <= 1).all())
+
+
+def test_cut_holds_one_node_on_every_root_to_leaf_path(device):
+    rng = np.random.default_rng(0)
+    tree = build(device, *plane_photons(rng, 20000, 3.0))
+    chosen = cut.select(device, tree, 50)
+    assert cut_is_valid(tree, chosen.nodes)
+
+
+def test_evenly_lit_plane_is_cut_far_above_the_leaves(device):
+    rng = np.random.default_rng(0)
+    tree = build(device, *plane_photons(rng, 20000, 3.0))
+    chosen = cut.select(device, tree, 50)
+    leaves = int((tree.nodes()["axis"] == cut.LEAF).sum())
+    assert 0 < len(chosen.nodes) < leaves / 20
+
+
+def test_irradiance_from_the_cut_matches_a_lit_plane(device):
+    rng = np.random.default_rng(1)
+    tree = build(device, *plane_photons(rng, 50000, 3.0))
+    chosen = cut.select(device, tree, 50)
+    q = np.zeros((2000, 3), np.float32)
+    q[:, :2] = rng.uniform(-0.8, 0.8, (2000, 2))
+    e = chosen.irradiance_at(q, np.tile(UP, (2000, 1)))
+    assert abs(e.mean() / 3.0 - 1.0) < 0.05
+    assert np.sqrt(((e / 3.0 - 1.0) ** 2).mean()) < 0.15
+
+
+def test_walls_meeting_at_a_corner_keep_their_own_irradiance(device):
+    # a floor at E = 2 and a wall at E = 6 meet along x = -1: nodes spanning both are split
+    rng = np.random.default_rng(2)
+    floor = plane_photons(rng, 30000, 2.0, axis=2, offset=-1.0)
+    wall = plane_photons(rng, 30000, 6.0, axis=0, offset=-1.0)
+    tree = build(device, *(np.concatenate(pair) for pair in zip(floor, wall)))
+    chosen = cut.select(device, tree, 50)
+    assert chosen.stats["mixed_nodes"] > 0
+    q_floor = rng.uniform(-0.7, 0.7, (500, 3)).astype(np.float32)
+    q_floor[:, 2] = -1.0
+    q_wall = rng.uniform(-0.7, 0.7, (500, 3)).astype(np.float32)
+    q_wall[:, 0] = -1.0
+    e_floor = chosen.irradiance_at(q_floor, np.tile(UP, (500, 1)))
+    e_wall = chosen.irradiance_at(q_wall, np.tile([1.0, 0.0, 0.0], (500, 1)))
+    assert abs(e_floor.mean() / 2.0 - 1.0) < 0.06
+    assert abs(e_wall.mean() / 6.0 - 1.0) < 0.06
+
+
+def test_points_facing_away_from_every_node_get_no_light(device):
+    rng = np.random.default_rng(3)
+    tree = build(device, *plane_photons(rng, 5000, 1.0))
+    chosen = cut.select(device, tree, 30)
+    q = np.zeros((10, 3), np.float32)
+    assert np.all(chosen.irradiance_at(q, np.tile(-UP, (10, 1))) == 0.0)
+
+
+def test_points_beyond_every_node_take_the_nearest_facing_node(device):
+    rng = np.random.default_rng(4)
+    tree = build(device, *plane_photons(rng, 5000, 2.0))
+    chosen = cut.select(device, tree, 30)
+    far = np.array([[50.0, 0.0, 0.0]], np.float32)
+    e = chosen.irradiance_at(far, UP[None])
+    assert np.isfinite(e).all() and e[0, 0] > 0.5
+
+
+def test_no_photons_give_an_empty_cut_and_zero_irradiance(device):
+    empty = np.zeros((0, 3), np.float32)
+    tree = PointTree.build(device, empty, empty, empty, empty)
+    chosen = cut.select(device, tree, 50)
+    assert len(chosen.nodes) == 0
+    assert np.all(chosen.irradiance_at(np.zeros((3, 3)), np.tile(UP, (3, 1))) == 0.0)
+
+
+@pytest.mark.parametrize("power_scale", [1e-6, 1e8])
+def test_dim_and_blinding_photons_scale_the_irradiance_linearly(device, power_scale):
+    rng = np.random.default_rng(5)
+    pts, power, normal = plane_photons(rng, 20000, 1.0)
+    base = cut.select(device, build(device, pts, power, normal), 50)
+    scaled = cut.select(device, build(device, pts, power * np.float32(power_scale), normal), 50)
+    q = np.zeros((200, 3), np.float32)
+    q[:, :2] = rng.uniform(-0.8, 0.8, (200, 2))
+    e0 = base.irradiance_at(q, np.tile(UP, (200, 1)))
+    e1 = scaled.irradiance_at(q, np.tile(UP, (200, 1)))
+    assert np.isfinite(e1).all()
+    np.testing.assert_allclose(e1 / power_scale, e0, rtol=1e-3)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e4])
+def test_tiny_and_huge_scenes_give_irradiance_over_scale_squared(device, scale):
+    rng = np.random.default_rng(6)
+    pts, power, normal = plane_photons(rng, 20000, 1.0)
+    base = cut.select(device, build(device, pts, power, normal), 50)
+    scaled = cut.select(device, build(device, pts * np.float32(scale), power, normal), 50)
+    q = np.zeros((200, 3), np.float32)
+    q[:, :2] = rng.uniform(-0.8, 0.8, (200, 2))
+    e0 = base.irradiance_at(q, np.tile(UP, (200, 1)))
+    e1 = scaled.irradiance_at(q * np.float32(scale), np.tile(UP, (200, 1)))
+    np.testing.assert_allclose(e1 * scale**2, e0, rtol=1e-2)

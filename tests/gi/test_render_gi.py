@@ -1,0 +1,201 @@
+"""The GI mode: shading points, final gathering, and whole images against
+the reference path tracer (the same kernels' ground truth), at the extremes."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scenes_py import camera_looking_down, make_scene, on_device, quad
+
+from gpu_core.device.layout import float4_rows
+from gpu_core.gi import cut, gather, shading_points
+from gpu_core.gi.cache import outliers
+from gpu_core.renderer import Renderer
+from gpu_core.scene import LIGHT_POINT, Lights, Materials
+from gpu_core.settings import RenderSettings
+
+# small and quick: a few thousand photons and cache points at 24 x 24 pixels
+GI = RenderSettings(mode="gi", samples=4, global_photons=60_000, caustic_photons=60_000, photon_k=40,
+                    cache_seeds=150, gather_rays=64, cut_delta=0.25)
+
+
+def box_scene(albedo=0.5, power=100.0, size=2.0, offset=(0.0, 0.0, 0.0), mirror=False, light=True):
+    """A closed cube seen from inside, a point light in it; optionally a
+    mirror panel on the floor. ``offset`` moves everything."""
+    h = size / 2
+    faces = [quad((0, 0, -h), size), quad((0, 0, h), size, flip=True),
+             quad((0, -h, 0), size, normal_axis=1), quad((0, h, 0), size, normal_axis=1, flip=True),
+             quad((-h, 0, 0), size, normal_axis=0), quad((h, 0, 0), size, normal_axis=0, flip=True)]
+    tris = np.concatenate(faces)
+    ids = [0] * len(tris)
+    mats = [dict(base_color=(albedo,) * 3)]
+    if mirror:
+        tris = np.concatenate([tris, quad((0.3 * size, 0, -h + 0.01 * size), 0.4 * size)])
+        ids += [1, 1]
+        mats.append(dict(base_color=(0.9,) * 3, metallic=1.0, roughness=0.0))
+    tris = tris + np.asarray(offset)
+    lights = [dict(kind=LIGHT_POINT, position=np.asarray((0.15, 0.1, 0.3)) * size + offset,
+                   power=(power,) * 3)] if light else []
+    camera = camera_looking_down(height=0.45 * size, half_width=0.5 * size, size=24,
+                                 center=(offset[0], offset[1]))
+    camera.matrix[2, 3] += offset[2]
+    camera.clip_start, camera.clip_end = 1e-3 * size, 10 * size
+    return make_scene(tris, np.array(ids, np.int32), Materials.make(mats), Lights.make(lights), camera)
+
+
+def rgb(result):
+    return result.passes["Combined"][..., :3].astype(np.float64)
+
+
+# -- stage kernels against oracles ----------------------------------------------
+
+
+def constant_cut(device, irradiance):
+    """A cut giving ``irradiance`` at every surface of a box: one node per
+    wall direction, each spanning the whole box."""
+    normals = np.concatenate([np.eye(3), -np.eye(3)])
+    return cut.Cut.from_nodes(device, np.zeros((6, 3)), normals, np.full(6, 100.0), np.full((6, 3), irradiance))
+
+
+def test_gather_in_a_closed_box_returns_albedo_times_the_irradiance_it_is_given(device):
+    scene, up = on_device(device, box_scene(albedo=0.5))
+    points = shading_points.trace(device, up, (0, 0, 24, 24), 8)
+    rng = np.random.default_rng(0)
+    # points on the edges where two walls meet too: they step back off both walls
+    on_edge = np.nonzero((np.abs(points.positions) > 0.999).sum(axis=1) >= 2)[0]
+    assert len(on_edge) >= 10
+    pick = np.concatenate([on_edge[:20], rng.choice(len(points.positions), 20, replace=False)])
+    result = gather.gather(device, up, device.to_device(float4_rows(points.positions[pick])),
+                           device.to_device(float4_rows(points.normals[pick])), len(pick), 6,
+                           constant_cut(device, 2.0), None, k=16)
+    assert result.stats["hit_fraction"] == 1.0  # nothing escapes a closed box
+    np.testing.assert_allclose(result.irradiance, 0.5 * 2.0, rtol=1e-5)
+    # every hit lies inside the 2 m box, at most its diagonal away
+    assert np.all((result.harmonic_distance > 0) & (result.harmonic_distance < 2 * np.sqrt(3)))
+
+
+def test_shading_points_look_through_mirrors_to_the_surfaces_they_show(device):
+    scene, up = on_device(device, box_scene(albedo=0.5, mirror=True))
+    points = shading_points.trace(device, up, (0, 0, 24, 24), 8, subpixels=2)
+    # every camera ray ends on a diffuse surface: the floor, walls, or their mirror image
+    assert len(points.positions) == 24 * 24 * 4
+    p = points.positions
+    on_mirror = (np.abs(p[:, 2] + 0.98) < 1e-3) & (np.abs(p[:, 0] - 0.6) < 0.4) & (np.abs(p[:, 1]) < 0.4)
+    assert not on_mirror.any()
+    # the rays that met the mirror went on up: points on the ceiling and upper walls
+    assert (p[:, 2] > 0.0).sum() > 20
+
+
+# -- whole images ----------------------------------------------------------------
+
+
+def test_gi_image_matches_the_reference_path_tracer_in_a_closed_box(device):
+    scene = box_scene(albedo=0.5)
+    gi = rgb(Renderer(device).render(scene, GI))
+    reference = rgb(Renderer(device).render(scene, RenderSettings(samples=256, diffuse_bounces=32)))
+    assert np.isfinite(gi).all()
+    assert abs(gi.mean() / reference.mean() - 1.0) < 0.05
+    assert np.sqrt(((gi - reference) ** 2).mean()) / reference.mean() < 0.12
+
+
+def test_light_seen_through_a_mirror_reaches_the_image(device):
+    scene = box_scene(albedo=0.5, mirror=True)
+    gi = rgb(Renderer(device).render(scene, GI))
+    reference = rgb(Renderer(device).render(scene, RenderSettings(samples=256, diffuse_bounces=32)))
+    assert abs(gi.mean() / reference.mean() - 1.0) < 0.06
+
+
+def test_plan_names_the_gi_stages_and_skips_the_caustic_map_without_mirrors(device):
+    result = Renderer(device).render(box_scene(), GI)
+    plan = result.stats["plan"]
+    assert result.stats["mode"] == "gi"
+    assert {"global_photons", "sample_points", "illumination_cut", "final_gather", "interpolation"} <= set(plan)
+    assert "caustic_photons" not in plan and "path_traced_indirect" not in plan
+    assert result.stats["gi"]["photons"]["maps"]["caustic"].startswith("skipped")
+    with_mirror = Renderer(device).render(box_scene(mirror=True), GI)
+    assert {"caustic_photons", "caustics"} <= set(with_mirror.stats["plan"])
+
+
+def test_photons_and_kdtree_are_not_rebuilt_when_only_the_camera_moves(device):
+    renderer = Renderer(device)
+    scene = box_scene()
+    first = renderer.render(scene, GI)
+    camera = dataclasses.replace(scene.camera, matrix=scene.camera.matrix.copy())
+    camera.matrix[0, 3] += 0.1
+    moved = renderer.render(dataclasses.replace(scene, camera=camera), GI)
+    assert "global_photons" in first.stats["plan"] and "kdtree" in first.stats["plan"]
+    assert "global_photons_reused" in moved.stats["plan"] and moved.stats["gi"]["photons_reused"]
+    assert "kdtree_reused" in moved.stats["plan"]
+    brighter = renderer.render(box_scene(power=200.0), GI)
+    assert "global_photons" in brighter.stats["plan"]  # a light edit traces again
+    assert "kdtree_reused" in brighter.stats["plan"]  # the same triangles keep their tree
+
+
+# -- extremes ----------------------------------------------------------------------
+
+
+def test_no_lights_give_a_black_finite_image(device):
+    image = rgb(Renderer(device).render(box_scene(light=False), GI))
+    assert np.isfinite(image).all() and image.max() == 0.0
+
+
+@pytest.mark.parametrize("power", [1e-6, 1e8])
+def test_dim_and_blinding_lights_scale_the_image_linearly(device, power):
+    base = rgb(Renderer(device).render(box_scene(power=1.0), GI))
+    scaled = rgb(Renderer(device).render(box_scene(power=power), GI))
+    assert np.isfinite(scaled).all()
+    np.testing.assert_allclose(scaled.mean() / power, base.mean(), rtol=1e-3)
+
+
+def test_albedo_one_walls_stay_finite_and_bounded(device):
+    image = rgb(Renderer(device).render(box_scene(albedo=1.0), GI))
+    direct = rgb(Renderer(device).render(box_scene(albedo=1.0), RenderSettings(samples=4)))
+    assert np.isfinite(image).all()
+    # light keeps bouncing up to the photon bounce limit: brighter than direct, not unbounded
+    assert direct.mean() < image.mean() < 20 * direct.mean()
+
+
+@pytest.mark.parametrize("knobs", [dict(cache_seeds=1), dict(cache_seeds=24 * 24), dict(gather_rays=1)],
+                         ids=["one_seed", "one_seed_per_pixel", "one_gather_ray"])
+def test_extreme_cache_settings_leave_no_holes(device, knobs):
+    image = rgb(Renderer(device).render(box_scene(), dataclasses.replace(GI, **knobs)))
+    indirect_free = rgb(Renderer(device).render(box_scene(), RenderSettings(samples=4)))
+    assert np.isfinite(image).all()
+    # every pixel gets some indirect light on top of its direct light
+    assert np.all(image.sum(axis=2) > indirect_free.sum(axis=2))
+
+
+@pytest.mark.parametrize("size, offset", [(1e-3, 0.0), (1e4, 0.0), (2.0, 1e5)],
+                         ids=["millimetre", "ten_km", "far_from_origin"])
+def test_scaled_and_moved_scenes_give_the_unit_scene_image(device, size, offset):
+    unit = rgb(Renderer(device).render(box_scene(), GI))
+    # irradiance falls with distance squared: power scaled with size^2 keeps the image
+    other = box_scene(size=size, power=100.0 * (size / 2.0) ** 2, offset=(offset, -offset, offset))
+    image = rgb(Renderer(device).render(other, GI))
+    assert np.isfinite(image).all()
+    assert abs(image.mean() / unit.mean() - 1.0) < 0.03
+    assert np.sqrt(((image - unit) ** 2).mean()) / unit.mean() < 0.1
+
+
+def test_a_lone_bright_cache_sample_is_brought_down_to_its_neighbours(device):
+    rng = np.random.default_rng(3)
+    positions = np.zeros((400, 3), np.float32)
+    positions[:, :2] = rng.uniform(-1, 1, (400, 2))
+    positions[7, :2] = (-0.8, -0.8)
+    irradiance = np.ones((400, 3), np.float32)
+    irradiance[7] = 100.0  # one sample saw a focused caustic
+    bright = np.linalg.norm(positions[:, :2] - [0.5, 0.5], axis=1) < 0.35
+    irradiance[bright] = 50.0  # a lit patch many samples see
+    out, count = outliers.clamp_outliers(device, device.to_device(float4_rows(positions)),
+                                         device.to_device(float4_rows(irradiance)), len(positions))
+    clamped = device.read(out, (len(positions), 4), np.float32)[:, :3]
+    np.testing.assert_allclose(clamped[7], outliers.OUTLIER_RATIO, rtol=1e-5)
+    # the patch stays lit where its samples' neighbours are in it too
+    d = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2)
+    nearest = np.argsort(d, axis=1)[:, 1:outliers.OUTLIER_NEIGHBOURS + 1]
+    inner = bright & bright[nearest].all(axis=1)
+    assert inner.sum() > 10 and np.all(clamped[inner] == 50.0)
+    assert np.all(clamped[~bright & (np.arange(400) != 7)] == 1.0)
+    assert count >= 1

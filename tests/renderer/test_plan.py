@@ -1,0 +1,108 @@
+"""The plan: decided before anything runs, edit by edit (what is uploaded,
+rebuilt, traced again or reused), with the device memory GI takes."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scenes_py import camera_looking_down, make_scene, quad
+
+from gpu_core.errors import BudgetError
+from gpu_core.plan import Held, plan
+from gpu_core.renderer import Renderer
+from gpu_core.scene import LIGHT_POINT, Lights, Materials, validate
+from gpu_core.settings import RenderSettings
+
+GI = RenderSettings(mode="gi", samples=2, global_photons=20_000, caustic_photons=20_000, photon_k=20,
+                    cache_seeds=60, gather_rays=16)
+
+
+def room(power=100.0, albedo=0.5, mirror=False, shift=0.0):
+    """A closed box with a point light; optionally a mirror panel; ``shift`` moves one wall."""
+    faces = [quad((0, 0, -1), 2), quad((0, 0, 1), 2, flip=True), quad((0, -1, 0), 2, normal_axis=1),
+             quad((0, 1, 0), 2, normal_axis=1, flip=True), quad((-1 + shift, 0, 0), 2, normal_axis=0),
+             quad((1, 0, 0), 2, normal_axis=0, flip=True)]
+    tris = np.concatenate(faces)
+    ids = [0] * len(tris)
+    mats = [dict(base_color=(albedo,) * 3)]
+    if mirror:
+        tris = np.concatenate([tris, quad((0.5, 0, -0.98), 0.6)])
+        ids += [1, 1]
+        mats.append(dict(base_color=(0.9,) * 3, metallic=1.0))
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0.2, 0.1, 0.5), power=(power,) * 3)])
+    camera = camera_looking_down(height=0.9, half_width=1.0, size=16)
+    camera.clip_start, camera.clip_end = 1e-3, 20.0
+    return make_scene(tris, np.array(ids, np.int32), Materials.make(mats), lights, camera)
+
+
+def held_after(scene, settings):
+    """What a renderer holds after rendering ``scene``, as the plan sees it."""
+    first = plan(validate(scene), settings)
+    return Held(digests=first.digests, generations=first.generations, tables=first.tables,
+                photon_key=first.photon_key)
+
+
+def moved_camera(scene):
+    camera = dataclasses.replace(scene.camera, matrix=scene.camera.matrix.copy())
+    camera.matrix[0, 3] += 0.1
+    return dataclasses.replace(scene, camera=camera)
+
+
+@pytest.mark.parametrize("edit, uploads, kdtree, photons", [
+    (moved_camera, {"camera"}, "kdtree_reused", "global_photons_reused"),
+    (lambda s: room(albedo=0.7), {"materials"}, "kdtree_reused", "global_photons"),
+    (lambda s: room(power=200.0), {"lights"}, "kdtree_reused", "global_photons"),
+    (lambda s: room(shift=0.1), None, "kdtree", "global_photons"),
+], ids=["camera", "material_colour", "light_power", "geometry"])
+def test_each_edit_uploads_rebuilds_and_traces_only_what_it_touches(edit, uploads, kdtree, photons):
+    held = held_after(room(), GI)
+    edited = plan(validate(edit(room())), GI, held)
+    assert kdtree in edited.stages and photons in edited.stages
+    if uploads is not None:
+        assert edited.changed == uploads
+    assert edited.traces_photons == (photons == "global_photons")
+
+
+def test_settings_photon_tracing_does_not_read_keep_the_photon_maps():
+    held = held_after(room(), GI)
+    more_rays = plan(validate(room()), dataclasses.replace(GI, gather_rays=64, cache_seeds=90), held)
+    assert more_rays.changed == set() and "global_photons_reused" in more_rays.stages
+    more_photons = plan(validate(room()), dataclasses.replace(GI, global_photons=30_000), held)
+    assert "global_photons" in more_photons.stages and more_photons.traces_photons
+
+
+def test_edits_named_by_the_caller_skip_the_hashing():
+    held = held_after(room(), GI)
+    named = plan(validate(room(power=200.0)), GI, held, edits={"lights"})
+    assert named.changed == {"lights"} and named.digests is None
+    assert "kdtree_reused" in named.stages and named.traces_photons
+
+
+def test_the_caustic_map_is_planned_only_with_a_specular_surface():
+    plain = plan(validate(room()), GI)
+    assert plain.photon_maps["caustic"].startswith("skipped") and "caustics" not in plain.stages
+    with_mirror = plan(validate(room(mirror=True)), GI)
+    assert with_mirror.photon_maps["caustic"].startswith("built") and "caustics" in with_mirror.stages
+
+
+def test_the_render_runs_what_the_plan_says(device):
+    renderer = Renderer(device)
+    scene = room(mirror=True)
+    first = renderer.render(scene, GI)
+    again = renderer.render(moved_camera(scene), GI)
+    assert first.stats["gi"]["photons"]["maps"] == plan(validate(scene), GI).photon_maps
+    assert "global_photons_reused" in again.stats["plan"] and "caustic_photons_reused" in again.stats["plan"]
+    assert "photons" in again.stats["ms"] and again.stats["gi"]["photons_reused"]
+
+
+def test_gi_memory_counts_in_the_budget_before_any_kernel_runs():
+    scene = validate(room())
+    reference, gi = plan(scene, RenderSettings()), plan(scene, dataclasses.replace(GI, global_photons=2_000_000))
+    assert gi.device_bytes > reference.device_bytes + 2_000_000 * 3 * 64
+    device = type("Small", (), dict(name="small device", global_mem_bytes=gi.device_bytes - 1,
+                                    max_alloc_bytes=gi.largest_buffer))()
+    reference.check_budget(device)
+    with pytest.raises(BudgetError, match="small device"):
+        gi.check_budget(device)
