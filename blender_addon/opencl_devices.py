@@ -1,10 +1,9 @@
 """The OpenCL devices this computer offers, with their OpenCL and driver
-versions, for the preferences.
+versions, for the preferences and for a clear message when there is none.
 
-Only names and versions are read: no context is opened, no kernel runs.
-Devices are numbered as gpu_core numbers them ("P:D", the platform's index
-and the device's index in it; platforms without devices are skipped), so a
-choice made here is a device spec gpu_core understands.
+Only names and versions are read (gpu_core.device.describe_devices): no
+context is opened, no kernel runs. Devices are numbered as gpu_core numbers
+them ("P:D"), so a choice made here is a device spec gpu_core understands.
 """
 
 from __future__ import annotations
@@ -16,23 +15,8 @@ from functools import lru_cache
 
 
 @dataclass(frozen=True)
-class DeviceInfo:
-    spec: str  # "P:D"
-    platform: str
-    name: str
-    kind: str  # "CPU", "GPU" or "other"
-    opencl: str  # the device's OpenCL version string
-    driver: str  # the driver's version string
-
-    @property
-    def label(self) -> str:
-        """``"P:D  platform / device"``, as gpu_core.device.list_devices() writes it."""
-        return f"{self.spec}  {self.platform} / {self.name}"
-
-
-@dataclass(frozen=True)
 class Survey:
-    devices: tuple[DeviceInfo, ...]
+    devices: tuple  # gpu_core.device.DeviceInfo, in order
     problem: str = ""  # with no device: one line saying what to install
 
 
@@ -47,46 +31,10 @@ def install_hint() -> str:
 def survey() -> Survey:
     """The devices found (asked once: the OpenCL loader lists its platforms once per process)."""
     try:
-        import pyopencl as cl
-    except Exception as err:  # missing, or its library failed to load
+        from gpu_core.device import describe_devices
+    except ImportError as err:  # pyopencl missing, or its library failed to load
         return Survey((), f"pyopencl cannot be imported ({err}). Install GPU GI as an extension: it bundles pyopencl.")
-    try:
-        platforms = cl.get_platforms()
-    except Exception:  # no OpenCL driver at all
-        platforms = []
-    devices = []
-    for p_index, cl_platform in enumerate(platforms):
-        try:
-            found = cl_platform.get_devices()
-        except Exception:  # a platform without devices
-            continue
-        for d_index, device in enumerate(found):
-            devices.append(DeviceInfo(
-                spec=f"{p_index}:{d_index}",
-                platform=_text(cl_platform, "name"),
-                name=_text(device, "name"),
-                kind=_kind(cl, device),
-                opencl=_text(device, "version"),
-                driver=_text(device, "driver_version"),
-            ))
+    devices = tuple(describe_devices())
     if not devices:
         return Survey((), f"No OpenCL device found. {install_hint()}")
-    return Survey(tuple(devices))
-
-
-def _text(obj, attribute: str) -> str:
-    """An info string of a platform or device; a driver that cannot say gives 'unknown'."""
-    try:
-        return str(getattr(obj, attribute)).strip()
-    except Exception:
-        return "unknown"
-
-
-def _kind(cl, device) -> str:
-    try:
-        device_type = device.type
-    except Exception:
-        return "other"
-    if device_type & cl.device_type.GPU:
-        return "GPU"
-    return "CPU" if device_type & cl.device_type.CPU else "other"
+    return Survey(devices)

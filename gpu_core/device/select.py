@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import threading
+from dataclasses import dataclass
 
 import pyopencl as cl
 
@@ -25,7 +26,7 @@ def _all_devices() -> list[tuple[int, cl.Platform, list[cl.Device]]]:
     out = []
     try:
         platforms = cl.get_platforms()
-    except cl.Error:
+    except cl.Error:  # no OpenCL driver at all
         return out
     for index, platform in enumerate(platforms):
         try:
@@ -37,13 +38,47 @@ def _all_devices() -> list[tuple[int, cl.Platform, list[cl.Device]]]:
     return out
 
 
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What a user picking a device wants to know of it (no context is opened)."""
+
+    spec: str  # "P:D", a spec get_device takes
+    platform: str
+    name: str
+    kind: str  # "CPU", "GPU" or "other"
+    opencl: str  # the device's OpenCL version string
+    driver: str  # the driver's version string
+
+    @property
+    def label(self) -> str:
+        """``"P:D  platform / device"``."""
+        return f"{self.spec}  {self.platform} / {self.name}"
+
+
+def describe_devices() -> list[DeviceInfo]:
+    """Every device of every platform, with its kind and versions."""
+    return [DeviceInfo(f"{index}:{number}", _text(platform, "name"), _text(dev, "name"), _kind(dev),
+                       _text(dev, "version"), _text(dev, "driver_version"))
+            for index, platform, devices in _all_devices() for number, dev in enumerate(devices)]
+
+
+def _text(obj, attribute: str) -> str:
+    """An info string of a platform or device; a driver that cannot say gives 'unknown'."""
+    try:
+        return str(getattr(obj, attribute)).strip()
+    except cl.Error:
+        return "unknown"
+
+
+def _kind(dev: cl.Device) -> str:
+    if dev.type & cl.device_type.GPU:
+        return "GPU"
+    return "CPU" if dev.type & cl.device_type.CPU else "other"
+
+
 def list_devices() -> list[str]:
     """``"P:D  platform / device"`` lines for every device, for UI and errors."""
-    return [
-        f"{index}:{number}  {platform.name.strip()} / {dev.name.strip()}"
-        for index, platform, devices in _all_devices()
-        for number, dev in enumerate(devices)
-    ]
+    return [info.label for info in describe_devices()]
 
 
 def _match(spec: str, found) -> cl.Device | None:
