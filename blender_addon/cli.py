@@ -7,7 +7,8 @@
 Every knob of gpu_core's RenderSettings is an option (--global-photons,
 --gather-rays, ...); they apply after --preset. Prints the mode, the
 image's path, each stage's time and the bytes moved to and from the device;
-on an error, prints one line and exits non-zero.
+while kernels compile (a first run), their count on stderr; on an error,
+prints one line and exits non-zero.
 """
 
 from __future__ import annotations
@@ -101,9 +102,10 @@ def render_file(args) -> tuple[dict, list[str], str]:
     import bpy
 
     from . import register
-    from .final import LAST_RUN
+    from .final import LAST_RUN, STATUS_LISTENERS
 
     register()
+    STATUS_LISTENERS[:] = [_CompileProgress()]
     try:
         bpy.ops.wm.open_mainfile(filepath=blend)
     except RuntimeError as err:
@@ -133,6 +135,23 @@ def render_file(args) -> tuple[dict, list[str], str]:
     if not os.path.isfile(output):
         raise CliError(f"no image was written to {args.output}")
     return LAST_RUN.get("stats", {}), LAST_RUN.get("warnings", []), output
+
+
+class _CompileProgress:
+    """Prints "compiling kernels 3/9" to stderr as the count changes: on one
+    rewritten line in a terminal, a line each otherwise."""
+
+    def __init__(self):
+        self._last = ""
+        self._tty = sys.stderr.isatty()
+
+    def __call__(self, message: str) -> None:
+        compiling = message.startswith("compiling kernels")
+        if compiling and message != self._last:
+            print(("\r" if self._tty else "") + message, end="" if self._tty else "\n", file=sys.stderr, flush=True)
+        elif not compiling and self._last and self._tty:
+            print(file=sys.stderr)  # end the rewritten line
+        self._last = message if compiling else ""
 
 
 def _set_output(render, output: str, ext: str) -> None:

@@ -7,6 +7,7 @@ polled between them), then write the passes into Blender's render result.
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from .status import format_stage_times, mode_line
 # What the last final render in this process did: the command line and the
 # tests read it ("stats", "warnings", "passes", "error", "cancelled").
 LAST_RUN: dict = {}
+# Called with each status line a render shows ("compiling kernels 3/9"):
+# the command line prints them.
+STATUS_LISTENERS: list[Callable[[str], None]] = []
 
 
 def render_final(engine, depsgraph) -> None:
@@ -68,6 +72,8 @@ def _render(engine, depsgraph):
     def progress(fraction: float, message: str) -> None:
         engine.update_progress(fraction)
         engine.update_stats("", f"GPU GI | {message}")
+        for listener in STATUS_LISTENERS:
+            listener(message)
 
     from gpu_core.renderer import Renderer
 

@@ -21,6 +21,7 @@ from .image import programs as image_programs
 from .photons import trace as photon_trace
 from .photons.emit import Emitter, emitter_powers, maps_needed
 from .accel import kdtree_build
+from .device.primitives import programs as primitives_programs
 from .scene.model import PARTS, Scene, part_digests
 from .scene.tables import SceneTables, scene_tables
 from .settings import RenderSettings
@@ -193,10 +194,13 @@ def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tup
 
 
 def _programs(device, settings: RenderSettings, the_plan: Plan) -> list[tuple[str, dict]]:
-    """Every program the render builds, for building them up front."""
-    wanted = kdtree_build.programs(device) + image_programs(the_plan.image_defines)
+    """Every program the render builds, in the order the stages need them
+    (they are built from the start, in that order)."""
+    wanted = primitives_programs()
+    if "kdtree" in the_plan.stages:
+        wanted += kdtree_build.programs(device)
     if settings.mode == "gi":
         if the_plan.traces_photons:
             wanted += photon_trace.programs(the_plan.scene_defines)
         wanted += gi_pipeline.programs(device, settings, the_plan.stages, the_plan.scene_defines)
-    return wanted
+    return wanted + image_programs(the_plan.image_defines)

@@ -4,7 +4,7 @@ One Renderer serves F12, ``blender -b`` and the viewport, and keeps on the
 device what a later render can reuse (the scene's buffers part by part,
 the kd-tree, the photon maps). A render: validate the scene; plan it
 (plan.py: what changed, what runs, what is reused, the memory it takes);
-build every program it needs, in parallel, from the start; upload what
+build every program it needs (in parallel, progress reported); upload what
 changed (the kd-tree is built when the triangles changed); in GI mode,
 trace or keep the photon maps and run the GI stages (gi/pipeline.py); then
 the image kernel (image.py), in launches between which progress is
@@ -60,11 +60,10 @@ class Renderer:
             the_plan = plan(scene, settings, self._held, edits, self.device)
         the_plan.check_budget(self.device)
         moved = self.device.transfers()
-        builds = _Builds(self.device, the_plan.programs)
-        builds.report(progress)
+        with timer.stage("compile"):
+            _Builds(self.device, the_plan.programs).join(progress, should_stop)
         check_stop(should_stop)
         self._upload(scene, the_plan, timer)
-        builds.report(progress)
         check_stop(should_stop)
         field_ = None
         if settings.mode == "gi":
@@ -77,9 +76,6 @@ class Renderer:
                                the_plan.stages, the_plan.scene_defines, timer)
             field_.stats["photons_reused"] = not the_plan.traces_photons
             check_stop(should_stop)
-        with timer.stage("compile"):
-            builds.join(progress, should_stop)
-        check_stop(should_stop)
         with timer.stage("render"):
             passes, batches = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
                                            field_, progress, should_stop)
@@ -141,10 +137,10 @@ class Renderer:
 
 
 class _Builds:
-    """Every program a render needs, built from its start in a background
-    thread (in parallel where the driver allows); stages that need a program
-    before it is done wait for it. Progress is reported from the render's
-    own thread ("compiling kernels 3/9"), never from the builder's."""
+    """Every program a render needs, built before any stage runs, in a
+    background thread (in parallel where the driver allows) while the
+    render's own thread reports progress ("compiling kernels 3/9") and sees
+    a request to stop; the builder's thread never calls back."""
 
     def __init__(self, device: Device, programs: list):
         self._error: GpuGiError | None = None
@@ -160,17 +156,15 @@ class _Builds:
         except GpuGiError as err:
             self._error = err
 
-    def report(self, progress) -> None:
-        """Tell ``progress`` how far the builds are, while they run."""
-        if progress is not None and self._thread.is_alive() and self._total:
-            progress(0.0, f"compiling kernels {self._done}/{self._total}")
-
     def join(self, progress=None, should_stop=None) -> None:
-        """Wait for every build (reporting progress, seeing a request to
-        stop); a build's error is raised here."""
-        while self._thread.is_alive():
+        """Wait for every build, reporting the count as it changes and
+        seeing a request to stop; a build's error is raised here."""
+        reported = None
+        while self._thread.is_alive() or reported not in (None, self._done):
             self._thread.join(0.1)
-            self.report(progress)
+            if progress is not None and self._total and reported != self._done:
+                reported = self._done
+                progress(0.0, f"compiling kernels {self._done}/{self._total}")
             check_stop(should_stop)
         if self._error is not None:
             raise self._error

@@ -637,3 +637,32 @@ __kernel void KdBuild_output(const __global int4 *rec_info,
     }
     nodes[addr[p]] = node;
 }
+
+/* ---- inputs of the host's scans and statistics ---------------------------- */
+
+/* Chunks of each active large node. */
+__kernel void KdBuild_chunk_counts(const __global int4 *act_info, const int n, __global int *counts) {
+    int i = get_global_id(0);
+    if (i < n) counts[i] = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
+}
+
+/* Per small node, what the rank scan adds up: 1 for a split (its two
+ * children), or its triangle count in the high word for a leaf. */
+__kernel void KdBuild_small_ranks(const __global int *best, const __global ulong *mask, const int n,
+                                  __global long *ranks) {
+    int i = get_global_id(0);
+    if (i < n) ranks[i] = best[i] >= 0 ? 1L : ((long)popcount(mask[i]) << 32);
+}
+
+/* Per record: its SAH term (cost times surface area, x) and, for the
+ * leaf statistics, (is a leaf, its size, its size, its depth). */
+__kernel void KdBuild_statistics(const __global int4 *rec_info, const __global float4 *rec_lo,
+                                 const __global float4 *rec_hi, const int n, __global float4 *terms,
+                                 __global int4 *sizes) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int4 info = rec_info[i];
+    bool leaf = info.x == KD_LEAF;
+    terms[i] = (float4)((leaf ? (float)info.z : KD_COST_TRAVERSE) * KdBuild_area(rec_lo[i], rec_hi[i]), 0.0f, 0.0f, 0.0f);
+    sizes[i] = leaf ? (int4)(1, info.z, info.z, info.w) : (int4)(0, 0, 0, info.w);
+}

@@ -78,39 +78,6 @@ class _Config:
         }
 
 
-def _scan(device: Device, dtype, arguments: str, input_expr: str, neutral: str = "0"):
-    """An exclusive scan writing its total to total[0]."""
-    return primitives.scan_kernel(device, dtype, arguments, input_expr,
-                                  "out[i] = prev_item; if (i + 1 == n) total[0] = item;", neutral=neutral)
-
-
-class _Primitives:
-    """The scans and reductions of the build, made once per device."""
-
-    def __init__(self, device: Device):
-        self.chunk_scan = _scan(device, np.int32,
-                                "__global const int4 *info, __global int *out, __global int *total, const int n",
-                                f"(info[i].y + {CHUNK - 1}) / {CHUNK}")
-        self.long_scan = _scan(device, np.int64,
-                               "__global const long *in, __global long *out, __global long *total, const int n", "in[i]")
-        self.counter_scan = _scan(device, cltypes.int8,
-                                  "__global const int8 *in, __global int8 *out, __global int8 *total, const int n",
-                                  "in[i]", neutral="(int8)(0)")
-        self.rank_scan = _scan(device, np.int64,
-                               "__global const int *best, __global const ulong *mask, __global long *out, "
-                               "__global long *total, const int n",
-                               "best[i] >= 0 ? 1L : ((long)popcount(mask[i]) << 32)")
-        area = "(2.0f * ((hi[i].x - lo[i].x) * (hi[i].y - lo[i].y) + (hi[i].y - lo[i].y) * " \
-               "(hi[i].z - lo[i].z) + (hi[i].z - lo[i].z) * (hi[i].x - lo[i].x)))"
-        self.sah = primitives.reduction_kernel(
-            device, np.float32, "0", "a + b", f"(info[i].x == {LEAF} ? (float)info[i].z : {COST_TRAVERSE!r}f) * {area}",
-            "__global const int4 *info, __global const float4 *lo, __global const float4 *hi")
-        self.leaf_stats = primitives.reduction_kernel(
-            device, cltypes.int4, "(int4)(0)", "(int4)(a.x + b.x, a.y + b.y, max(a.z, b.z), max(a.w, b.w))",
-            f"(info[i].x == {LEAF} ? (int4)(1, info[i].z, info[i].z, info[i].w) : (int4)(0, 0, 0, info[i].w))",
-            "__global const int4 *info")
-
-
 class _Growing:
     """A device array appended to level by level, doubling its capacity."""
 
@@ -142,7 +109,6 @@ class _Build:
     def __init__(self, device: Device, verts: cla.Array, count: int, sah_lanes: int | None):
         self.device = device
         self.config = _Config(device, sah_lanes)
-        self.prim = device.memo(("kdtree_build", "primitives"), lambda: _Primitives(device))
         self.verts = verts
         self.count = count
         self.max_depth = depth_limit(count)
@@ -194,19 +160,19 @@ class _Build:
         dev.write(self.act_hi.data, self.hi)
         dev.write(self.act_info.data, np.array([0, count, 0, 0], np.int32))
         self.active, self.elements = 1, count
-        self.totals = (dev.array(1, np.int32), dev.array(1, np.int64), dev.array(1, cltypes.int8))
+        self.totals = (dev.empty(4), dev.array(1, np.int64), dev.array(1, cltypes.int8))
         while self.active:
             self.large_levels += 1
             self._large_level()
 
     def _large_level(self) -> None:
-        dev, prim, i32 = self.device, self.prim, np.int32
+        dev, i32 = self.device, np.int32
         active, elements = self.active, self.elements
         total_i, total_l, total_8 = self.totals
         # chunks of every active node, and each chunk's bounds
         chunk_base = dev.array(active, np.int32)
-        prim.chunk_scan(self.act_info, chunk_base, total_i, i32(active), size=active, queue=dev.queue)
-        chunks = int(dev.get(total_i)[0])
+        self.kernel("KdBuild_chunk_counts")(active, self.act_info.data, i32(active), chunk_base.data)
+        chunks = int(dev.scalar(primitives.scan(dev, chunk_base.data, active, total=total_i)))
         chunk_node = dev.array(chunks, np.int32)
         chunk_lo, chunk_hi = dev.array(chunks, cltypes.float4), dev.array(chunks, cltypes.float4)
         el_node = dev.array(elements, np.int32)
@@ -225,7 +191,7 @@ class _Build:
             elements, self.verts.data, self.el_tri.data, self.el_lo.data, self.el_hi.data, el_node.data,
             node_split.data, node_mode.data, i32(elements), self.eps, flags.data, *[b.data for b in boxes])
         flag_scan = dev.array(elements, np.int64)
-        prim.long_scan(flags, flag_scan, total_l, i32(elements), size=elements, queue=dev.queue)
+        primitives.scan(dev, flags.data, elements, "long", out=flag_scan.data, total=total_l.data)
         # children counts, with every node a leaf once the element budget is spent
         node_counts, counters, counter_scan = (dev.array(active, t) for t in (cltypes.int2, cltypes.int8, cltypes.int8))
         budget = ELEMENT_BUDGET * self.count + 65536
@@ -233,7 +199,7 @@ class _Build:
             self.kernel("KdBuild_large_children")(
                 active, self.act_info.data, node_mode.data, flag_scan.data, total_l.data, i32(elements), i32(active),
                 i32(self.max_depth), i32(force_leaf), node_counts.data, counters.data)
-            prim.counter_scan(counters, counter_scan, total_8, i32(active), size=active, queue=dev.queue)
+            primitives.scan(dev, counters.data, active, "int8", out=counter_scan.data, total=total_8.data)
             totals = _values(dev, total_8, np.int32)
             if totals[0] <= budget:
                 break
@@ -298,7 +264,8 @@ class _Build:
             self.rec_hi.data, self.rec_info.data, self.sel_lo.data, self.sel_hi.data, self.cand.data, i32(active),
             i32(self.max_depth), best.data)
         rank = dev.array(active, np.int64)
-        self.prim.rank_scan(best, self.sn_mask, rank, self.small_total, i32(active), size=active, queue=dev.queue)
+        self.kernel("KdBuild_small_ranks")(active, best.data, self.sn_mask.data, i32(active), rank.data)
+        primitives.scan(dev, rank.data, active, "long", total=self.small_total.data)
         packed = int(dev.get(self.small_total)[0])
         splits, leaf_new = packed & 0xFFFFFFFF, packed >> 32
         self._reserve_records(2 * splits)
@@ -330,11 +297,13 @@ class _Build:
 
     def statistics(self) -> dict:
         """Node, leaf and depth counts and the SAH cost, reduced on the device."""
-        dev, q, n = self.device, self.device.queue, self.rec_count
-        info = self.rec_info.array
-        leaves, leaf_sum, leaf_max, depth = (int(x) for x in _values(
-            dev, self.prim.leaf_stats(info, range=slice(n), queue=q), np.int32))
-        sah = float(dev.get(self.prim.sah(info, self.rec_lo.array, self.rec_hi.array, range=slice(n), queue=q)))
+        dev, n = self.device, self.rec_count
+        terms, sizes = dev.empty(16 * n), dev.empty(16 * n)
+        self.kernel("KdBuild_statistics")(n, self.rec_info.data, self.rec_lo.data, self.rec_hi.data, np.int32(n),
+                                          terms, sizes)
+        leaves, leaf_sum = (int(x) for x in primitives.sum_int4(dev, sizes, n)[:2])
+        leaf_max, depth = (int(x) for x in primitives.max_int4(dev, sizes, n)[2:])
+        sah = float(primitives.sum_float4(dev, terms, n)[0])
         d = (self.hi - self.lo)[:3].astype(np.float64)
         root_area = 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0])
         return {

@@ -122,7 +122,8 @@ class _Build:
         # the chunks of every active node, and their bounds
         counts = dev.array(n_active, np.int32)
         self.launch("PointBuild_chunk_counts", n_active, active.data, nodes.data, counts.data, i32(n_active))
-        chunk_end = primitives.inclusive_sum(dev, counts)
+        primitives.scan(dev, counts.data, n_active, inclusive=True)
+        chunk_end = counts
         n_chunks = int(dev.get(chunk_end[n_active - 1: n_active])[0])
         chunks = dev.array(n_chunks, CHUNK_DTYPE)
         chunk_lo, chunk_hi = dev.array(4 * n_chunks, np.float32), dev.array(4 * n_chunks, np.float32)
@@ -135,7 +136,7 @@ class _Build:
                     chunk_hi.data, np.float32(self.params.empty_ratio), i32(n_active))
         self.launch("PointBuild_chunk_count_left", n_chunks, chunks.data, active.data, nodes.data, self.work.data,
                     chunk_left.data, i32(n_chunks))
-        primitives.inclusive_sum(dev, chunk_left, left_end)
+        primitives.scan(dev, chunk_left.data, n_chunks, out=left_end.data, inclusive=True)
         base = self.table.reserve(2 * n_active)
         nodes = self.table.array
         self.launch("PointBuild_large_split", n_active, active.data, nodes.data, chunk_end.data, left_end.data,
@@ -148,10 +149,10 @@ class _Build:
         classes = dev.array(2 * n_active, np.int32)
         self.launch("PointBuild_classify", 2 * n_active, nodes.data, i32(base), i32(2 * n_active), self.max_depth,
                     classes.data)
-        smalls, n_small = primitives.compact(dev, classes, 2, base)
+        smalls, n_small = primitives.compact_class(dev, classes, 2, base)
         if n_small:
             self.small_parts.append(smalls[:n_small])
-        return primitives.compact(dev, classes, 1, base)
+        return primitives.compact_class(dev, classes, 1, base)
 
     def small_stage(self) -> None:
         """VVH splits over bit masks of each small root's points."""
@@ -183,7 +184,7 @@ class _Build:
         self.launch("PointBuild_small_decide", n_active, active.data, self.table.array.data, self.work.data,
                     self.masks.data, np.float32(self.radius), np.float32(self.params.cost_traverse), self.max_depth,
                     flag.data, cand.data, i32(n_active))
-        splitting, n_split = primitives.compact(dev, flag, 1, 0)
+        splitting, n_split = primitives.compact_class(dev, flag, 1, 0)
         if not n_split:
             return active, 0
         base = self.table.reserve(2 * n_split)
@@ -193,7 +194,7 @@ class _Build:
         classes = dev.array(2 * n_split, np.int32)
         self.launch("PointBuild_small_classify", 2 * n_split, self.table.array.data, i32(base), i32(2 * n_split),
                     self.max_depth, classes.data)
-        return primitives.compact(dev, classes, 1, base)
+        return primitives.compact_class(dev, classes, 1, base)
 
     def output_stage(self) -> tuple:
         """Sums bottom-up, preorder addresses top-down, then every node and

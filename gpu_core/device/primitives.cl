@@ -1,57 +1,117 @@
-/* Device primitives beside pyopencl's scans: index ramps, a stable radix
- * sort and the runs of sorted keys. Every work item of the sort owns one
- * chunk of consecutive elements and walks it in order, which keeps it
- * stable: equal keys stay in index order, so sums over a group come out the
- * same on every run. Host side: gpu_core/device/primitives.py. */
+/* Device primitives: prefix sums, reductions, compaction, index ramps, a
+ * stable radix sort and the runs of sorted keys (host side:
+ * gpu_core/device/primitives.py). One small program: a render starts fast
+ * (each of pyopencl's generic scan and reduction kernels costs seconds of
+ * compilation on the CPU device).
+ *
+ * Every work item owns one chunk of PRIM_CHUNK consecutive elements and
+ * walks it in order: sums come out the same on every run, and the sort is
+ * stable (equal keys stay in index order). */
 
+#define PRIM_CHUNK 256
 #define PRIM_RADIX (1 << PRIM_RADIX_BITS)
 
-/* values[i] = i. */
-__kernel void Prim_iota(__global int *values, const int n) {
-    int i = get_global_id(0);
-    if (i < n) values[i] = i;
-}
-
-/* Per chunk, how many keys have each digit; stored digit-major so one
- * exclusive scan of the table gives every (digit, chunk) its first slot. */
-__kernel void Prim_radix_count(const __global uint *keys, const int n, const int shift,
-                               const int chunk, __global int *table, const int chunks) {
-    int c = get_global_id(0);
-    if (c >= chunks) return;
-    int hist[PRIM_RADIX];
-    for (int d = 0; d < PRIM_RADIX; ++d) hist[d] = 0;
-    int end = min(n, (c + 1) * chunk);
-    for (int i = c * chunk; i < end; ++i) hist[(keys[i] >> shift) & (PRIM_RADIX - 1)]++;
-    for (int d = 0; d < PRIM_RADIX; ++d) table[d * chunks + c] = hist[d];
-}
-
-/* Move each (key, value) of the chunk to its slot, in order (stable). */
-__kernel void Prim_radix_scatter(const __global uint *keys, const __global int *values,
-                                 __global uint *keys_out, __global int *values_out,
-                                 const int n, const int shift, const int chunk,
-                                 const __global int *table, const int chunks) {
-    int c = get_global_id(0);
-    if (c >= chunks) return;
-    int slot[PRIM_RADIX];
-    for (int d = 0; d < PRIM_RADIX; ++d) slot[d] = table[d * chunks + c];
-    int end = min(n, (c + 1) * chunk);
-    for (int i = c * chunk; i < end; ++i) {
-        uint key = keys[i];
-        int at = slot[(key >> shift) & (PRIM_RADIX - 1)]++;
-        keys_out[at] = key;
-        values_out[at] = values[i];
+/* ---- prefix sums of int, long and int8 ---------------------------------
+ * Exclusive (or inclusive) prefix sums, in place allowed; the total goes to
+ * total[0]. Short arrays: one work item. Longer ones: each chunk's sum,
+ * the chunk sums scanned (by the host, recursively), then each chunk
+ * rescanned from its offset. */
+#define PRIM_SCAN(T, NAME)                                                                        \
+    __kernel void Prim_scan_serial_##NAME(const __global T *in, __global T *out, const int n,     \
+                                          const int inclusive, __global T *total) {               \
+        if (get_global_id(0) != 0) return;                                                        \
+        T sum = (T)(0);                                                                           \
+        for (int i = 0; i < n; ++i) {                                                             \
+            T v = in[i];                                                                          \
+            out[i] = inclusive ? sum + v : sum;                                                   \
+            sum += v;                                                                             \
+        }                                                                                         \
+        total[0] = sum;                                                                           \
+    }                                                                                             \
+    __kernel void Prim_scan_reduce_##NAME(const __global T *in, const int n, __global T *sums,   \
+                                          const int chunks) {                                     \
+        int c = get_global_id(0);                                                                 \
+        if (c >= chunks) return;                                                                  \
+        T sum = (T)(0);                                                                           \
+        for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) sum += in[i];    \
+        sums[c] = sum;                                                                            \
+    }                                                                                             \
+    __kernel void Prim_scan_apply_##NAME(const __global T *in, __global T *out, const int n,      \
+                                         const int inclusive, const __global T *offsets,          \
+                                         const int chunks) {                                      \
+        int c = get_global_id(0);                                                                 \
+        if (c >= chunks) return;                                                                  \
+        T sum = offsets[c];                                                                       \
+        for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) {                \
+            T v = in[i];                                                                          \
+            out[i] = inclusive ? sum + v : sum;                                                   \
+            sum += v;                                                                             \
+        }                                                                                         \
     }
+
+PRIM_SCAN(int, int)
+PRIM_SCAN(long, long)
+PRIM_SCAN(int8, int8)
+
+/* ---- reductions --------------------------------------------------------
+ * out[c] = the reduction of chunk c; the host reduces the partials again
+ * until one is left. */
+#define PRIM_REDUCE(T, NAME, ZERO, COMBINE)                                                       \
+    __kernel void Prim_reduce_##NAME(const __global T *in, const int n, __global T *out,          \
+                                     const int chunks) {                                          \
+        int c = get_global_id(0);                                                                 \
+        if (c >= chunks) return;                                                                  \
+        T acc = ZERO;                                                                             \
+        for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) {                \
+            T b = in[i];                                                                          \
+            acc = COMBINE(acc, b);                                                                \
+        }                                                                                         \
+        out[c] = acc;                                                                             \
+    }
+
+#define PRIM_ADD(a, b) ((a) + (b))
+PRIM_REDUCE(long, sum_long, 0L, PRIM_ADD)
+PRIM_REDUCE(int4, sum_int4, (int4)(0), PRIM_ADD)
+PRIM_REDUCE(int4, max_int4, (int4)(INT_MIN), max)
+PRIM_REDUCE(float4, min_float4, (float4)(INFINITY), fmin)
+PRIM_REDUCE(float4, max_float4, (float4)(-INFINITY), fmax)
+
+/* Sums of float4 to float64 accuracy: each value is a float8 of the sum
+ * (lo half) and the rounding error the sum lost (hi half), combined by
+ * Knuth's two-sum, so the result does not depend on how rounding fell. */
+inline float8 Prim_two_sum(float8 a, float8 b) {
+    float4 s = a.lo + b.lo;
+    float4 bp = s - a.lo;
+    float4 err = (a.lo - (s - bp)) + (b.lo - bp);
+    return (float8)(s, a.hi + b.hi + err);
+}
+PRIM_REDUCE(float8, sum_float8, (float8)(0.0f), Prim_two_sum)
+
+/* float4 values as (value, no error) float8s, for Prim_reduce_sum_float8. */
+__kernel void Prim_float8_of(const __global float4 *in, const int n, __global float8 *out) {
+    int i = get_global_id(0);
+    if (i < n) out[i] = (float8)(in[i], (float4)(0.0f));
 }
 
-/* For sorted keys, [start[k], end[k]) is the run of key k; both arrays are
- * zero beforehand, so absent keys give empty runs. */
-__kernel void Prim_group_ranges(const __global uint *keys, const int n, __global int *start,
-                                __global int *end) {
+/* int values as (value, 0, 0, 0) int4s, for the int4 reductions. */
+__kernel void Prim_int4_of(const __global int *in, const int n, __global int4 *out) {
     int i = get_global_id(0);
-    if (i >= n) return;
-    uint key = keys[i];
-    if (i == 0 || keys[i - 1] != key) start[key] = i;
-    if (i == n - 1 || keys[i + 1] != key) end[key] = i + 1;
+    if (i < n) out[i] = (int4)(in[i], 0, 0, 0);
+}
+
+/* ---- compaction and gathers -------------------------------------------- */
+
+/* base + i for every i whose flag is set, at its exclusive prefix sum. */
+__kernel void Prim_compact(const __global int *flags, const __global int *scanned, const int n, const int base,
+                           __global int *out) {
+    int i = get_global_id(0);
+    if (i < n && flags[i]) out[scanned[i]] = base + i;
+}
+
+/* flags[i] = classes[i] == which. */
+__kernel void Prim_flags_equal(const __global int *classes, const int n, const int which, __global int *flags) {
+    int i = get_global_id(0);
+    if (i < n) flags[i] = classes[i] == which;
 }
 
 /* out[i] = values[index[i]] for float4 rows. */
@@ -65,4 +125,51 @@ __kernel void Prim_gather_float4(const __global float4 *values, const __global i
 __kernel void Prim_indexed_points(const __global float4 *points, const int n, __global float4 *out) {
     int i = get_global_id(0);
     if (i < n) out[i] = (float4)(points[i].xyz, as_float(i));
+}
+
+/* values[i] = i. */
+__kernel void Prim_iota(__global int *values, const int n) {
+    int i = get_global_id(0);
+    if (i < n) values[i] = i;
+}
+
+/* ---- stable radix sort and group-by-key -------------------------------- */
+
+/* Per chunk, how many keys have each digit; stored digit-major so one
+ * exclusive scan of the table gives every (digit, chunk) its first slot. */
+__kernel void Prim_radix_count(const __global uint *keys, const int n, const int shift, __global int *table,
+                               const int chunks) {
+    int c = get_global_id(0);
+    if (c >= chunks) return;
+    int hist[PRIM_RADIX];
+    for (int d = 0; d < PRIM_RADIX; ++d) hist[d] = 0;
+    for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i)
+        hist[(keys[i] >> shift) & (PRIM_RADIX - 1)]++;
+    for (int d = 0; d < PRIM_RADIX; ++d) table[d * chunks + c] = hist[d];
+}
+
+/* Move each (key, value) of the chunk to its slot, in order (stable). */
+__kernel void Prim_radix_scatter(const __global uint *keys, const __global int *values, __global uint *keys_out,
+                                 __global int *values_out, const int n, const int shift, const __global int *table,
+                                 const int chunks) {
+    int c = get_global_id(0);
+    if (c >= chunks) return;
+    int slot[PRIM_RADIX];
+    for (int d = 0; d < PRIM_RADIX; ++d) slot[d] = table[d * chunks + c];
+    for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) {
+        uint key = keys[i];
+        int at = slot[(key >> shift) & (PRIM_RADIX - 1)]++;
+        keys_out[at] = key;
+        values_out[at] = values[i];
+    }
+}
+
+/* For sorted keys, [start[k], end[k]) is the run of key k; both arrays are
+ * zero beforehand, so absent keys give empty runs. */
+__kernel void Prim_group_ranges(const __global uint *keys, const int n, __global int *start, __global int *end) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    uint key = keys[i];
+    if (i == 0 || keys[i - 1] != key) start[key] = i;
+    if (i == n - 1 || keys[i + 1] != key) end[key] = i + 1;
 }

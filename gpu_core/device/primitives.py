@@ -1,139 +1,173 @@
 """Data-parallel primitives on the device, one home for all of them:
-pyopencl's scan and reduction kernels (made once per device, called under a
-lock so threads can share them), prefix sums, compaction, bounding boxes,
-and a stable radix sort with group-by-key (primitives.cl).
+prefix sums, reductions, compaction, gathers, bounding boxes, and a stable
+radix sort with group-by-key (primitives.cl).
+
+They are written here rather than taken from pyopencl because of what they
+cost before the first image: on the CPU device each of pyopencl's generic
+scan kernels took 3.4 s and each reduction kernel 1.3 s to compile (and a
+render used twenty of them), where this one program compiles in about a
+second. Every work item walks one chunk of consecutive elements in order,
+so results are the same on every run.
 
 The irradiance cache groups points by quadtree cell, by cluster, by grid
-cell and by hash bucket; each grouping is a stable sort of (key, index)
+cell and by hash bucket: each grouping is a stable sort of (key, index)
 pairs followed by the run of every key, so a group lists its members in
 index order and any sum over a group comes out the same on every run.
 """
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
-from pyopencl import cltypes
-from pyopencl.reduction import ReductionKernel
-from pyopencl.scan import GenericScanKernel
-from pyopencl.tools import get_or_register_dtype
 
 from .constants import PRIM_RADIX_BITS
 from .device import Device
-from .layout import STRUCTS, structs_header
 
 _PROGRAM = "device/primitives.cl"
-_CHUNK = 256  # elements per work item of the sort passes
+CHUNK = 256  # elements per work item (primitives.cl PRIM_CHUNK)
+_SERIAL_MAX = 4096  # prefix sums up to this length run in one work item
+_SCAN_TYPES = {"int": np.dtype(np.int32), "long": np.dtype(np.int64), "int8": np.dtype((np.int32, 8))}
 
 
-class _Locked:
-    """A pyopencl kernel object that one thread at a time may call."""
-
-    def __init__(self, kernel):
-        self._kernel = kernel
-        self._lock = threading.Lock()
-
-    def __call__(self, *args, **kwargs):
-        with self._lock:
-            return self._kernel(*args, **kwargs)
+def programs() -> list[tuple[str, dict]]:
+    """The program of the primitives (for building it up front)."""
+    return [(_PROGRAM, {})]
 
 
-def _register_structs() -> None:
-    """Make the shared structs known to pyopencl's code generators by their
-    C names (so scan and reduction arguments may point to them)."""
-    for struct in STRUCTS:
-        get_or_register_dtype(struct.name, struct.dtype)
+def _k(device: Device, name: str):
+    return device.kernel(_PROGRAM, name)
 
 
-_register_structs()
+def _chunks(n: int) -> int:
+    return -(-n // CHUNK)
 
 
-def scan_kernel(device: Device, dtype, arguments: str, input_expr: str, output_statement: str,
-                neutral: str = "0", scan_expr: str = "a + b") -> _Locked:
-    """A pyopencl GenericScanKernel, made once per device and signature; the
-    shared structs (device/structs.h) are declared for it."""
-    key = ("scan", str(np.dtype(dtype).descr), arguments, input_expr, output_statement, neutral, scan_expr)
-    return device.memo(key, lambda: _Locked(GenericScanKernel(
-        device.context, dtype, arguments=arguments, input_expr=input_expr, scan_expr=scan_expr,
-        neutral=neutral, output_statement=output_statement, preamble=structs_header())))
-
-
-def reduction_kernel(device: Device, dtype, neutral: str, reduce_expr: str, map_expr: str, arguments: str,
-                     preamble: str = "") -> _Locked:
-    """A pyopencl ReductionKernel, made once per device and signature; the
-    shared structs (device/structs.h) are declared before ``preamble``."""
-    key = ("reduce", str(np.dtype(dtype).descr), neutral, reduce_expr, map_expr, arguments, preamble)
-    return device.memo(key, lambda: _Locked(ReductionKernel(
-        device.context, dtype, neutral=neutral, reduce_expr=reduce_expr, map_expr=map_expr, arguments=arguments,
-        preamble=structs_header() + preamble)))
-
-
-_WITH_TOTAL = "out[i] = prev_item; if (i + 1 == n) total[0] = item;"
-
-
-def exclusive_scan(device: Device, data: cl.Buffer, n: int, total: cl.Buffer | None = None) -> cl.Buffer:
-    """Exclusive prefix sum of ``n`` int32 in place; the sum goes to
-    ``total[0]`` (a new one-int buffer if not given), which is returned."""
-    total = total if total is not None else device.empty(4)
+def scan(device: Device, data: cl.Buffer, n: int, kind: str = "int", out: cl.Buffer | None = None,
+         inclusive: bool = False, total: cl.Buffer | None = None) -> cl.Buffer:
+    """Prefix sums of ``n`` values of ``kind`` ("int", "long" or "int8"
+    vectors) from ``data`` into ``out`` (in place when None), exclusive
+    unless ``inclusive``; the sum of all goes to ``total[0]`` (a new buffer
+    when None), which is returned."""
+    size = _SCAN_TYPES[kind].itemsize
+    out = data if out is None else out
+    total = device.empty(size) if total is None else total
     if n <= 0:
-        device.fill(total, 0, 4)
+        device.fill(total, 0, size)
         return total
-    kernel = scan_kernel(device, np.int32, "__global const int *in, __global int *out, __global int *total, const int n",
-                         "in[i]", _WITH_TOTAL)
-    view = device.view(data, n, np.int32)
-    kernel(view, view, device.view(total, 1, np.int32), np.int32(n), size=n, queue=device.queue)
+    flag = np.int32(inclusive)
+    if n <= _SERIAL_MAX:
+        _k(device, f"Prim_scan_serial_{kind}").groups(1, 1, data, out, np.int32(n), flag, total)
+        return total
+    chunks = _chunks(n)
+    sums = device.empty(size * chunks)
+    _k(device, f"Prim_scan_reduce_{kind}")(chunks, data, np.int32(n), sums, np.int32(chunks))
+    scan(device, sums, chunks, kind, total=total)
+    _k(device, f"Prim_scan_apply_{kind}")(chunks, data, out, np.int32(n), flag, sums, np.int32(chunks))
     return total
 
 
 def exclusive_scan_total(device: Device, data: cl.Buffer, n: int) -> int:
-    """Exclusive prefix sum in place; returns the sum."""
-    return int(device.scalar(exclusive_scan(device, data, n)))
+    """Exclusive prefix sum of ``n`` int32 in place; returns the sum."""
+    return int(device.scalar(scan(device, data, n)))
 
 
-def inclusive_sum(device: Device, values: cla.Array, out: cla.Array | None = None) -> cla.Array:
-    """Inclusive prefix sum of an int32 array (into ``out``, else in place)."""
-    if len(values) == 0:
-        return values if out is None else out
-    out = values if out is None else out
-    kernel = scan_kernel(device, np.int32, "__global const int *in, __global int *out", "in[i]", "out[i] = item;")
-    kernel(values, out, size=len(values), queue=device.queue)
-    return out
+def _reduce(device: Device, name: str, values: cl.Buffer, n: int, dtype) -> np.ndarray:
+    """One value of ``dtype``: ``values`` (n > 0 of them) reduced by Prim_reduce_<name>."""
+    if n <= 0:
+        raise ValueError("a reduction needs at least one value")
+    kernel = _k(device, f"Prim_reduce_{name}")
+    size = np.dtype(dtype).itemsize
+    while True:
+        chunks = _chunks(n)
+        partial = device.empty(size * chunks)
+        kernel(chunks, values, np.int32(n), partial, np.int32(chunks))
+        if chunks == 1:
+            return device.read(partial, 1, dtype)[0]
+        values, n = partial, chunks
 
 
-def compact(device: Device, classes: cla.Array, which: int, base: int = 0) -> tuple[cla.Array, int]:
-    """``base + i`` for every ``i`` with ``classes[i] == which``, in order, and how many."""
-    n = len(classes)
-    if n == 0:
-        return device.array(1, np.int32), 0
-    kernel = scan_kernel(
-        device, np.int32,
-        "__global const int *cls, __global int *out, __global int *count, const int which, const int base",
-        "cls[i] == which ? 1 : 0",
-        "if (prev_item != item) out[item - 1] = base + i; if (i + 1 == N) *count = item;")
-    out, count = device.array(n, np.int32), device.array(1, np.int32)
-    kernel(classes, out, count, np.int32(which), np.int32(base), queue=device.queue)
-    return out, int(device.get(count)[0])
+def sum_long(device: Device, values: cl.Buffer, n: int) -> int:
+    return int(_reduce(device, "sum_long", values, n, np.int64)) if n > 0 else 0
+
+
+def sum_int4(device: Device, values: cl.Buffer, n: int) -> np.ndarray:
+    """Lane sums of ``n`` int4 values."""
+    return _reduce(device, "sum_int4", values, n, np.dtype((np.int32, 4))) if n > 0 else np.zeros(4, np.int32)
+
+
+def max_int4(device: Device, values: cl.Buffer, n: int) -> np.ndarray:
+    """Lane maxima of ``n`` int4 values."""
+    return _reduce(device, "max_int4", values, n, np.dtype((np.int32, 4))) if n > 0 else np.zeros(4, np.int32)
+
+
+def sum_ints(device: Device, values: cl.Buffer, n: int) -> int:
+    """The sum of ``n`` int values."""
+    if n <= 0:
+        return 0
+    wide = device.empty(16 * n)
+    _k(device, "Prim_int4_of")(n, values, np.int32(n), wide)
+    return int(sum_int4(device, wide, n)[0])
+
+
+def sum_float4(device: Device, values: cl.Buffer, n: int) -> np.ndarray:
+    """Lane sums of ``n`` float4 values to float64 accuracy, as float64."""
+    if n <= 0:
+        return np.zeros(4)
+    pairs = device.empty(32 * n)
+    _k(device, "Prim_float8_of")(n, values, np.int32(n), pairs)
+    total = _reduce(device, "sum_float8", pairs, n, np.dtype((np.float32, 8))).astype(np.float64)
+    return total[:4] + total[4:]
 
 
 def bounds(device: Device, points: cl.Buffer, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) of ``n`` float4 points, reduced on the device (w included)."""
-    view = device.view(points, n, cltypes.float4)
-    lo = reduction_kernel(device, cltypes.float4, "(float4)(INFINITY)", "fmin(a, b)", "v[i]", "__global const float4 *v")
-    hi = reduction_kernel(device, cltypes.float4, "(float4)(-INFINITY)", "fmax(a, b)", "v[i]", "__global const float4 *v")
-    low = lo(view, range=slice(n), queue=device.queue)
-    high = hi(view, range=slice(n), queue=device.queue)
-    as_floats = [np.frombuffer(device.get(a).tobytes(), np.float32).copy() for a in (low, high)]
-    return as_floats[0], as_floats[1]
+    f4 = np.dtype((np.float32, 4))
+    return _reduce(device, "min_float4", points, n, f4), _reduce(device, "max_float4", points, n, f4)
+
+
+def compact(device: Device, flags: cl.Buffer, n: int, base: int = 0) -> tuple[cl.Buffer, int]:
+    """``base + i`` for every ``i`` whose int flag is set, in order, and how many."""
+    if n <= 0:
+        return device.empty(4), 0
+    scanned = device.empty(4 * n)
+    count = int(device.scalar(scan(device, flags, n, out=scanned)))
+    out = device.empty(4 * count)
+    _k(device, "Prim_compact")(n, flags, scanned, np.int32(n), np.int32(base), out)
+    return out, count
+
+
+def compact_class(device: Device, classes: cla.Array, which: int, base: int = 0) -> tuple[cla.Array, int]:
+    """``base + i`` for every ``i`` with ``classes[i] == which``, in order
+    (a device array), and how many."""
+    n = len(classes)
+    flags = device.empty(4 * n)
+    _k(device, "Prim_flags_equal")(n, classes.data, np.int32(n), np.int32(which), flags)
+    out, count = compact(device, flags, n, base)
+    return device.view(out, count, np.int32), count
+
+
+def gather_rows(device: Device, values: cl.Buffer, index: cl.Buffer, n: int) -> cl.Buffer:
+    """A new buffer of the float4 rows ``values[index[i]]``, i < n."""
+    out = device.empty(16 * n)
+    _k(device, "Prim_gather_float4")(n, values, index, np.int32(n), out)
+    return out
+
+
+def indexed_points(device: Device, points: cl.Buffer, n: int) -> cla.Array:
+    """(n, 4) float32 device array of the float4 ``points`` with each one's
+    index in w (int bits), as the point-tree builder takes them."""
+    out = device.array(4 * n, np.float32).reshape(max(n, 1), 4)
+    _k(device, "Prim_indexed_points")(n, points, np.int32(n), out.data)
+    return out[:n]
 
 
 def iota(device: Device, n: int) -> cl.Buffer:
     """A device buffer holding 0, 1, ..., n - 1 (int32)."""
     out = device.empty(4 * n)
-    device.kernel(_PROGRAM, "Prim_iota")(n, out, np.int32(n))
+    _k(device, "Prim_iota")(n, out, np.int32(n))
     return out
 
 
@@ -147,19 +181,18 @@ def sort_pairs(device: Device, keys: cl.Buffer, values: cl.Buffer, n: int, key_b
     passes = (bits + PRIM_RADIX_BITS - 1) // PRIM_RADIX_BITS
     if n <= 1 or passes == 0:
         return keys, values
-    chunks = -(-n // _CHUNK)
+    chunks = _chunks(n)
     radix = 1 << PRIM_RADIX_BITS
     table = device.empty(4 * radix * chunks)
     spare = [(device.empty(4 * n), device.empty(4 * n)), (device.empty(4 * n), device.empty(4 * n))]
     src = (keys, values)
-    count = device.kernel(_PROGRAM, "Prim_radix_count")
-    scatter = device.kernel(_PROGRAM, "Prim_radix_scatter")
+    count, scatter = _k(device, "Prim_radix_count"), _k(device, "Prim_radix_scatter")
     for p in range(passes):
         shift = np.int32(p * PRIM_RADIX_BITS)
         dst = spare[p % 2]
-        count(chunks, src[0], np.int32(n), shift, np.int32(_CHUNK), table, np.int32(chunks))
-        exclusive_scan(device, table, radix * chunks)
-        scatter(chunks, src[0], src[1], dst[0], dst[1], np.int32(n), shift, np.int32(_CHUNK), table, np.int32(chunks))
+        count(chunks, src[0], np.int32(n), shift, table, np.int32(chunks))
+        scan(device, table, radix * chunks)
+        scatter(chunks, src[0], src[1], dst[0], dst[1], np.int32(n), shift, table, np.int32(chunks))
         src = dst
     return src
 
@@ -179,20 +212,5 @@ def group(device: Device, keys: cl.Buffer, n: int, key_count: int) -> Groups:
     """Group ``n`` uint32 keys in ``[0, key_count)`` by key."""
     sorted_keys, order = sort_pairs(device, keys, iota(device, n), n, key_count)
     start, end = device.zeros(4 * key_count), device.zeros(4 * key_count)
-    device.kernel(_PROGRAM, "Prim_group_ranges")(n, sorted_keys, np.int32(n), start, end)
+    _k(device, "Prim_group_ranges")(n, sorted_keys, np.int32(n), start, end)
     return Groups(order=order, keys=sorted_keys, start=start, end=end, key_count=key_count)
-
-
-def gather_rows(device: Device, values: cl.Buffer, index: cl.Buffer, n: int) -> cl.Buffer:
-    """A new buffer of the float4 rows ``values[index[i]]``, i < n."""
-    out = device.empty(16 * n)
-    device.kernel(_PROGRAM, "Prim_gather_float4")(n, values, index, np.int32(n), out)
-    return out
-
-
-def indexed_points(device: Device, points: cl.Buffer, n: int) -> cla.Array:
-    """(n, 4) float32 device array of the float4 ``points`` with each one's
-    index in w (int bits), as the point-tree builder takes them."""
-    out = device.array(4 * n, np.float32).reshape(max(n, 1), 4)
-    device.kernel(_PROGRAM, "Prim_indexed_points")(n, points, np.int32(n), out.data)
-    return out[:n]

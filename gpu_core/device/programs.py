@@ -16,6 +16,7 @@ import os
 import re
 import threading
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +34,17 @@ _GENERATED: dict[str, Callable[[], str]] = {
     "device/layout_probe.cl": layout.probe_source,
 }
 _OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
-_CACHE_FORMAT = "2"
+_CACHE_FORMAT = "3"
+# A PoCL program binary holds every kernel compiled for any work-group size,
+# which compiles each kernel a second time (the launches compile their own
+# size): 11 of the 24 s of a first render. There the cache keeps the
+# compiled object instead (PoCL's LLVM bitcode, before linking), and a load
+# links it; PoCL's own cache keeps the work-group functions. PoCL's cache
+# keys a compiled object and a built program of one source alike, so the
+# compiled ones carry a define of their own: a full build of the same source
+# elsewhere would otherwise hand compile() a linked program to link again.
+_SEPARATE_PLATFORMS = ("Portable Computing Language",)
+_SEPARATE_MARK = "-DGPUGI_COMPILED_OBJECT=1"
 
 
 def kernel_cache_dir() -> Path:
@@ -97,6 +108,7 @@ class Programs:
     def __init__(self, context: cl.Context, device: cl.Device):
         self.context = context
         self.device = device
+        self._separate = device.platform.name.strip() in _SEPARATE_PLATFORMS
         self.builds: list[BuildRecord] = []
         self._programs: dict[tuple, cl.Program] = {}
         self._pending: dict[tuple, threading.Event] = {}
@@ -129,33 +141,42 @@ class Programs:
 
     def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None) -> None:
         """Build every (name, defines) in ``wanted`` that is not built yet, in
-        parallel threads; ``progress(done, total)`` after each one."""
+        parallel threads; ``progress(compiled, to_compile)`` after each one
+        that is not in the disk cache (loading one reports nothing)."""
         todo = list(dict.fromkeys((name, tuple(sorted((d or {}).items()))) for name, d in wanted))
         todo = [(n, dict(d)) for n, d in todo if (n, build_options(dict(d))) not in self._programs]
         if not todo:
             return
-        done = 0
+        uncached = [not self._cache_entry(n, build_options(d))[2].is_file() for n, d in todo]
+        compiled = 0
         workers = max(1, min(len(todo), os.cpu_count() or 1))
         with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gpugi-build") as pool:
-            for future in [pool.submit(self.get, n, d) for n, d in todo]:
+            for future, counted in zip([pool.submit(self.get, n, d) for n, d in todo], uncached):
                 future.result()
-                done += 1
-                if progress is not None:
-                    progress(done, len(todo))
+                if counted and progress is not None:
+                    compiled += 1
+                    progress(compiled, sum(uncached))
 
-    def _build(self, name: str, options: tuple[str, ...]) -> cl.Program:
-        start = time.perf_counter()
+    def _cache_entry(self, name: str, options: tuple[str, ...]) -> tuple[str, tuple[str, ...], Path]:
+        """The source of ``name``, the options it is built with on this
+        device, and its file in the disk cache."""
         source = load_source(name)
+        if self._separate:
+            options = options + (_SEPARATE_MARK,)
         dev = self.device
         ident = "\n".join([_CACHE_FORMAT, source, " ".join(options), dev.platform.name, dev.platform.version,
                            dev.name, dev.driver_version, cl.VERSION_TEXT, os.environ.get("POCL_WORK_GROUP_SPECIALIZATION", "")])
         digest = hashlib.sha256(ident.encode()).hexdigest()
-        path = kernel_cache_dir() / f"{Path(name).stem}-{digest[:32]}.bin"
+        return source, options, kernel_cache_dir() / f"{Path(name).stem}-{digest[:32]}.bin"
+
+    def _build(self, name: str, options: tuple[str, ...]) -> cl.Program:
+        start = time.perf_counter()
+        source, options, path = self._cache_entry(name, options)
         program = self._load_cached(path, options)
         from_cache = program is not None
         if program is None:
-            program = self._compile(name, source, options)
-            self._store_cached(path, program)
+            program, cached = self._compile(name, source, options)
+            self._store_cached(path, cached)
         with self._lock:
             self.builds.append(BuildRecord(name, from_cache, (time.perf_counter() - start) * 1e3))
         return program
@@ -166,13 +187,24 @@ class Programs:
         except OSError:
             return None
         try:
-            return cl.Program(self.context, [self.device], [binary]).build(options=list(options))
+            program = cl.Program(self.context, [self.device], [binary])
+            if self._separate:
+                return cl.link_program(self.context, [program])
+            return program.build(options=list(options))
         except (cl.Error, ValueError):
             return None
 
-    def _compile(self, name: str, source: str, options) -> cl.Program:
+    def _compile(self, name: str, source: str, options) -> tuple[cl.Program, cl.Program]:
+        """The built program, and what the disk cache keeps of it (the
+        program itself, or its compiled object)."""
         try:
-            return cl.Program(self.context, source).build(options=list(options))
+            if not self._separate:
+                program = cl.Program(self.context, source).build(options=list(options))
+                return program, program
+            with warnings.catch_warnings():  # pyopencl's own cache does not apply to a compiled object
+                warnings.simplefilter("ignore", UserWarning)
+                compiled = cl.Program(self.context, source).compile(options=list(options))
+            return cl.link_program(self.context, [compiled]), compiled
         except cl.RuntimeError as err:
             raise DeviceError(f"OpenCL program {name!r} failed to build on {self.device.name.strip()}:\n{err}") from err
 

@@ -101,3 +101,36 @@ __kernel void Cut_lookup(CUT_PARAMS, const __global float4 *points, const __glob
     Cut cut = CUT_MAKE();
     out[i] = (float4)(CutLookup_irradiance(&cut, points[i].xyz, normals[i].xyz), 0.0f);
 }
+
+/* ---- inputs of the host's reductions -------------------------------------- */
+
+/* Each node's depth (x), for the deepest level. */
+__kernel void Cut_depths(const __global PointNode *info, const int n, __global int4 *out) {
+    int i = get_global_id(0);
+    if (i < n) out[i] = (int4)(info[i].depth, 0, 0, 0);
+}
+
+/* (E~_p luminance, 0, 1, 0) of the lit nodes on levels a and b, else 0: summed, E_min's numerator and count. */
+__kernel void Cut_level_terms(const __global PointNode *info, const int n, const int a, const int b,
+                              __global float4 *out) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float e = Cut_approx(info, i);
+    bool on = (info[i].depth == a || info[i].depth == b) && e > 0.0f;
+    out[i] = on ? (float4)(e, 0.0f, 1.0f, 0.0f) : (float4)(0.0f);
+}
+
+/* 1 for a cut node that holds photons (empty leaves end their paths but give no light). */
+__kernel void Cut_kept(const __global int *in_cut, const __global PointNode *info, const int n, __global int *flags) {
+    int i = get_global_id(0);
+    if (i < n) flags[i] = in_cut[i] != 0 && info[i].count > 0;
+}
+
+/* (in the cut, a leaf in the cut holding photons, mixed, 0) per node, for the statistics. */
+__kernel void Cut_tally(const __global KdNode *nodes, const __global PointNode *info, const __global int *in_cut,
+                        const int n, __global int4 *out) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    bool cut = in_cut[i] != 0;
+    out[i] = (int4)(cut, cut && info[i].count > 0 && nodes[i].axis == KD_LEAF, Cut_mixed(nodes, info, i), 0);
+}

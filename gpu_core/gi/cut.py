@@ -30,12 +30,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
-from pyopencl import cltypes
 
 from ..accel.point_tree import PointTree
-from ..device import Device, load_source, primitives
-from ..device.constants import KD_LEAF as LEAF
-from ..device.layout import KDNODE_DTYPE, POINT_NODE_DTYPE, float4_rows
+from ..device import Device, primitives
+from ..device.constants import KD_LEAF as LEAF  # noqa: F401  (the leaf axis, for readers of the nodes)
+from ..device.layout import float4_rows
 
 DELTA = 0.2  # default refinement threshold, relative to E_p
 MAX_ROUNDS = 6  # default refinement rounds
@@ -115,13 +114,13 @@ def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_ro
         return Cut(device, device.empty(4), device.empty(16), device.empty(16), device.empty(16), 0, None, k, stats)
     kern = _Kernels(device, k)
     nodes, info = tree.kernel_args()[0], tree.node_buffer
-    e_min, levels = _e_min(device, info, n)
+    e_min, levels = _e_min(kern, info, n)
     parent = device.empty(4 * n)
     device.fill(parent, -1, 4 * n)
     kern("Cut_parents")(n, nodes, np.int32(n), parent)
     in_cut, exact = device.empty(4 * n), device.empty(16 * n)
     kern("Cut_coarse")(n, nodes, info, parent, np.int32(n), np.float32(e_min), in_cut, exact)
-    coarse = _count(device, in_cut, n)
+    coarse = _tally(kern, nodes, info, in_cut, n)[0]
     # refinement by exact estimates at the node centres
     refined, rounds, counter = 0, 0, device.empty(4)
     for rounds in range(1, max_rounds + 1):
@@ -134,11 +133,11 @@ def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_ro
             break
     kern("Cut_exact")(n, *tree.kernel_args(), *tree.photon_args(), info, in_cut, np.int32(n), np.int32(k), exact)
     # the cut without its empty leaves, in preorder
-    ids, count = _compact(device, in_cut, info, n)
+    ids, count = _compact(kern, in_cut, info, n)
     centre, normal, irradiance = device.empty(16 * count), device.empty(16 * count), device.empty(16 * count)
     kern("Cut_emit")(count, info, exact, ids, np.int32(count), centre, normal, irradiance)
     lookup = PointTree.from_device(device, primitives.indexed_points(device, centre, count)) if count else None
-    leaves, mixed = _leaves_and_mixed(device, nodes, info, in_cut, n)
+    _, leaves, mixed = _tally(kern, nodes, info, in_cut, n)
     stats = dict(tree_nodes=n, cut_nodes=count, coarse_nodes=coarse, e_min=float(e_min), e_min_levels=list(levels),
                  refined=refined, rounds=rounds, leaves_in_cut=leaves, mixed_nodes=mixed)
     return Cut(device, ids, centre, normal, irradiance, count, lookup, k, stats)
@@ -152,60 +151,30 @@ class _Kernels:
         return self.device.kernel(_PROGRAM, name, self.defines)
 
 
-_LUMINANCE = "Sampling_luminance(info[i].irradiance.xyz)"
-# double-float sums: (sum, error) pairs added without losing the error
-_TWO_SUM = """
-float4 Cut_two_sum(float4 a, float4 b) {
-    float s = a.x + b.x, bp = s - a.x;
-    float err = (a.x - (s - bp)) + (b.x - bp);
-    return (float4)(s, a.y + b.y + err, a.z + b.z, 0.0f);
-}
-"""
-
-
-def _e_min(device: Device, info: cl.Buffer, n: int) -> tuple[float, tuple[int, ...]]:
+def _e_min(kern: _Kernels, info: cl.Buffer, n: int) -> tuple[float, tuple[int, ...]]:
     """Mean non-zero E~_p over levels 12-13, or the two deepest levels;
     summed on the device to float64 accuracy."""
-    view = device.view(info, n, POINT_NODE_DTYPE)
-    depth = primitives.reduction_kernel(device, np.int32, "0", "max(a, b)", "info[i].depth",
-                                        "__global const PointNode *info")
-    deepest = int(device.get(depth(view, range=slice(n), queue=device.queue)))
+    device = kern.device
+    tally, terms = device.empty(16 * n), device.empty(16 * n)
+    kern("Cut_depths")(n, info, np.int32(n), tally)
+    deepest = int(primitives.max_int4(device, tally, n)[0])
     levels = LEVELS if deepest >= LEVELS[-1] else tuple(range(max(deepest - 1, 0), deepest + 1))
-    on = f"((info[i].depth == {levels[0]} || info[i].depth == {levels[-1]}) && {_LUMINANCE} > 0.0f)"
-    total = primitives.reduction_kernel(
-        device, cltypes.float4, "(float4)(0.0f)", "Cut_two_sum(a, b)",
-        f"({on} ? (float4)({_LUMINANCE}, 0.0f, 1.0f, 0.0f) : (float4)(0.0f))", "__global const PointNode *info",
-        preamble=load_source("device/sampling.h") + _TWO_SUM)
-    s, err, count, _ = np.frombuffer(device.get(total(view, range=slice(n), queue=device.queue)).tobytes(), np.float32)
-    return (float(np.float64(s) + np.float64(err)) / float(count) if count > 0 else 0.0), levels
+    kern("Cut_level_terms")(n, info, np.int32(n), np.int32(levels[0]), np.int32(levels[-1]), terms)
+    total, _, count, _ = primitives.sum_float4(device, terms, n)
+    return (total / count if count > 0 else 0.0), levels
 
 
-def _count(device: Device, flags: cl.Buffer, n: int) -> int:
-    """How many of ``n`` int flags are set."""
-    kernel = primitives.reduction_kernel(device, np.int32, "0", "a + b", "f[i] != 0", "__global const int *f")
-    return int(device.get(kernel(device.view(flags, n, np.int32), range=slice(n), queue=device.queue)))
-
-
-def _compact(device: Device, in_cut: cl.Buffer, info: cl.Buffer, n: int) -> tuple[cl.Buffer, int]:
+def _compact(kern: _Kernels, in_cut: cl.Buffer, info: cl.Buffer, n: int) -> tuple[cl.Buffer, int]:
     """Preorder ids of the cut nodes that hold photons, in order."""
-    kernel = primitives.scan_kernel(
-        device, np.int32, "__global const int *in_cut, __global const PointNode *info, __global int *ids, "
-        "__global int *total", "in_cut[i] != 0 && info[i].count > 0 ? 1 : 0",
-        "if (prev_item != item) ids[item - 1] = i; if (i + 1 == N) *total = item;")
-    ids, total = device.empty(4 * n), device.empty(4)
-    kernel(device.view(in_cut, n, np.int32), device.view(info, n, POINT_NODE_DTYPE), device.view(ids, n, np.int32),
-           device.view(total, 1, np.int32), size=n, queue=device.queue)
-    return ids, int(device.scalar(total))
+    flags = kern.device.empty(4 * n)
+    kern("Cut_kept")(n, in_cut, info, np.int32(n), flags)
+    return primitives.compact(kern.device, flags, n)
 
 
-def _leaves_and_mixed(device: Device, nodes: cl.Buffer, info: cl.Buffer, in_cut: cl.Buffer, n: int) -> tuple[int, int]:
-    """Leaves among the (non-empty) cut nodes, and mixed nodes in the tree."""
-    kernel = primitives.reduction_kernel(
-        device, cltypes.int2, "(int2)(0)", "a + b",
-        f"(int2)(in_cut[i] != 0 && info[i].count > 0 && nodes[i].axis == {LEAF}, "
-        f"nodes[i].axis != {LEAF} && info[i].normal.w < {COHERENT!r}f)",
-        "__global const KdNode *nodes, __global const PointNode *info, __global const int *in_cut")
-    got = kernel(device.view(nodes, n, KDNODE_DTYPE), device.view(info, n, POINT_NODE_DTYPE),
-                 device.view(in_cut, n, np.int32), range=slice(n), queue=device.queue)
-    leaves, mixed = np.frombuffer(device.get(got).tobytes(), np.int32)
-    return int(leaves), int(mixed)
+def _tally(kern: _Kernels, nodes: cl.Buffer, info: cl.Buffer, in_cut: cl.Buffer, n: int) -> tuple[int, int, int]:
+    """Nodes in the cut (empty leaves included), leaves among the cut nodes
+    that hold photons, and mixed nodes in the tree."""
+    tally = kern.device.empty(16 * n)
+    kern("Cut_tally")(n, nodes, info, in_cut, np.int32(n), tally)
+    in_cut_count, leaves, mixed, _ = (int(x) for x in primitives.sum_int4(kern.device, tally, n))
+    return in_cut_count, leaves, mixed

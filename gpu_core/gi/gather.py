@@ -79,15 +79,9 @@ def gather(device: Device, buffers: SceneBuffers, positions: cl.Buffer, normals:
         kernel.groups(count, group, *buffers.kernel_args(), *cut.kernel_args(), *caustic,
                       np.int32(caustic_map is not None), np.int32(k), positions, normals, np.int32(first), np.int32(m),
                       np.int32(strata), np.int32(max_specular), np.uint32(seed & 0xFFFFFFFF), e, distance, hits)
-    total_hits = _sum(device, hits, m)
+    total_hits = primitives.sum_ints(device, hits, m)
     stats = {"samples": m, "rays_per_sample": rays, "hit_fraction": total_hits / max(m * rays, 1)}
     return GatherResult(device, e, distance, hits, m, stats)
 
 
-def _sum(device: Device, values: cl.Buffer, n: int) -> int:
-    """The sum of ``n`` ints, reduced on the device."""
-    if n == 0:
-        return 0
-    kernel = primitives.reduction_kernel(device, np.int64, "0", "a + b", "v[i]", "__global const int *v")
-    return int(device.get(kernel(device.view(values, n, np.int32), range=slice(n), queue=device.queue)))
 

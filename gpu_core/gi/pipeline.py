@@ -20,6 +20,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..device import Device
+from ..accel.point_tree import query_programs
 from ..device.timer import StageTimer
 from ..photons.trace import PhotonMaps
 from ..scene.upload import SceneBuffers
@@ -87,14 +88,11 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
 
 def programs(device: Device, settings: RenderSettings, stages: list[str], scene_defines: dict) -> list:
     """The programs the GI stages of ``stages`` build."""
-    from ..accel.point_tree import query_programs
-    from ..accel.point_tree_build import PROGRAM as POINT_TREE_BUILD
-    from .cache import PROGRAMS as CACHE_PROGRAMS
-
     wanted = shading_points.programs(scene_defines)
     if "final_gather" in stages:
-        wanted += [(POINT_TREE_BUILD, {})] + list(CACHE_PROGRAMS) + outliers.programs()
-        wanted += cut.programs(settings.photon_k) + gather.programs(device, settings.photon_k, scene_defines)
+        wanted += samples.programs() + cut.programs(settings.photon_k)
+        wanted += gather.programs(device, settings.photon_k, scene_defines) + outliers.programs()
+        wanted += interpolation.programs()
     if "caustics" in stages:
         wanted += query_programs(settings.photon_k)
     return wanted

@@ -76,3 +76,18 @@ __kernel void ShadingPoints_scatter(const __global float4 *values, const __globa
     grid[slots[i]] = (float4)(isfinite(v.x) ? v.x : 0.0f, isfinite(v.y) ? v.y : 0.0f, isfinite(v.z) ? v.z : 0.0f,
                               isfinite(v.w) ? v.w : 0.0f);
 }
+
+/* 1 where a grid slot holds a point. */
+__kernel void ShadingPoints_found(const __global float4 *grid_pos, const int n, __global int *flags) {
+    int i = get_global_id(0);
+    if (i < n) flags[i] = grid_pos[i].w > 0.0f;
+}
+
+/* The pixel (x, y) in the window of each point, from its slot. */
+__kernel void ShadingPoints_pixels(const __global int *slots, const int n, const int width, const int sub2,
+                                   __global int2 *pixels) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int p = slots[i] / sub2;
+    pixels[i] = (int2)(p % width, p / width);
+}

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
-from pyopencl import cltypes
 
 from ..device import Device, primitives
 from ..scene.upload import SceneBuffers
@@ -68,27 +67,15 @@ def trace(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, in
     grid_pos, grid_nrm = device.empty(16 * n), device.empty(16 * n)
     device.kernel(_PROGRAM, "ShadingPoints_trace", scene_defines)(
         n, *buffers.kernel_args(), np.array(window, np.int32), np.int32(sub), np.int32(max_bounces), grid_pos, grid_nrm)
-    pos, nrm, pixel, slot = device.empty(16 * n), device.empty(16 * n), device.empty(8 * n), device.empty(4 * n)
-    count = _compact(device, grid_pos, grid_nrm, n, w, sub, pos, nrm, pixel, slot)
+    slot, count = _slots_with_points(device, grid_pos, n)
+    pos, nrm = primitives.gather_rows(device, grid_pos, slot, count), primitives.gather_rows(device, grid_nrm, slot, count)
+    pixel = device.empty(8 * count)
+    device.kernel(_PROGRAM, "ShadingPoints_pixels")(count, slot, np.int32(count), np.int32(w), np.int32(sub * sub), pixel)
     return ShadingPoints(device, grid_pos, grid_nrm, pos, nrm, pixel, slot, count, w, h, sub)
 
 
-def _compact(device: Device, grid_pos, grid_nrm, n: int, width: int, sub: int, pos, nrm, pixel, slot) -> int:
-    """Copy the slots that hold a point to the point lists, in slot order;
-    returns how many there are."""
-    if n == 0:
-        return 0
-    kernel = primitives.scan_kernel(
-        device, np.int32,
-        "__global const float4 *grid_pos, __global const float4 *grid_nrm, __global float4 *pos, "
-        "__global float4 *nrm, __global int2 *pixel, __global int *slot, __global int *count, "
-        "const int width, const int sub2",
-        "grid_pos[i].w > 0.0f ? 1 : 0",
-        "if (prev_item != item) { int j = item - 1; pos[j] = grid_pos[i]; nrm[j] = grid_nrm[i]; slot[j] = i; "
-        "int p = i / sub2; pixel[j] = (int2)(p % width, p / width); } if (i + 1 == N) *count = item;")
-    count = device.empty(4)
-    f4 = cltypes.float4
-    kernel(device.view(grid_pos, n, f4), device.view(grid_nrm, n, f4), device.view(pos, n, f4), device.view(nrm, n, f4),
-           device.view(pixel, n, cltypes.int2), device.view(slot, n, np.int32), device.view(count, 1, np.int32),
-           np.int32(width), np.int32(sub * sub), size=n, queue=device.queue)
-    return int(device.scalar(count))
+def _slots_with_points(device: Device, grid_pos: cl.Buffer, n: int) -> tuple[cl.Buffer, int]:
+    """The slots that found a surface, in slot order, and how many."""
+    flags = device.empty(4 * n)
+    device.kernel(_PROGRAM, "ShadingPoints_found")(n, grid_pos, np.int32(n), flags)
+    return primitives.compact(device, flags, n)

@@ -17,8 +17,6 @@ import numpy as np
 
 from ..accel.point_tree import PointTree
 from ..accel.point_tree_build import PROGRAM as POINT_TREE_BUILD
-from pyopencl import cltypes
-
 from ..device import Device, primitives
 from ..device.constants import PHOTON_PASS_ALL, PHOTON_PASS_CAUSTIC, PHOTON_PASS_GLOBAL
 from ..device.timer import StageTimer
@@ -138,10 +136,7 @@ def _path_sums(device: Device, path, n: int) -> np.ndarray:
     """Sums of the per-photon (power rgb, hits) rows, reduced on the device (float64)."""
     if n == 0:
         return np.zeros(4)
-    total = primitives.reduction_kernel(device, cltypes.float4, "(float4)(0.0f)", "a + b", "v[i]",
-                                        "__global const float4 *v")
-    return np.frombuffer(device.get(total(device.view(path.data, n, cltypes.float4), range=slice(n),
-                                          queue=device.queue)).tobytes(), np.float32).astype(np.float64)
+    return primitives.sum_float4(device, path.data, n)
 
 
 def trace_photon_maps(device: Device, scene: Scene, global_photons: int = 100_000, caustic_photons: int = 100_000,

@@ -43,7 +43,7 @@ def oracle_hits(tris, org, dirs, t_min, t_max):
             q = np.cross(s, e1)
             v = (d * q).sum(-1) * inv
             t = (e2 * q).sum(-1) * inv
-        w = 1.0 - u - v
+            w = 1.0 - u - v
         lo, hi = np.asarray(t_min)[start : start + 256, None], np.asarray(t_max)[start : start + 256, None]
         live = (det != 0) & (t > lo) & (t < hi)
         edge = np.minimum(np.minimum(u, v), w)

@@ -1,6 +1,7 @@
 """Esc during F12: test_break is polled between kernel batches and stops the render early.
 
-Counted in batches (one progress report per finished batch), never in seconds.
+Counted in batches (one progress report of a fraction above 0 per finished
+batch; compiling kernels reports 0), never in seconds.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ class BreakAfter:
         self.fractions: list[float] = []
 
     def update_progress(self, fraction):
-        self.fractions.append(fraction)
+        if fraction > 0.0:
+            self.fractions.append(fraction)
         self._engine.update_progress(fraction)
 
     def test_break(self):

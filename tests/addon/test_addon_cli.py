@@ -30,10 +30,10 @@ def small_blend(tmp_path_factory, bpy_module):
     return path
 
 
-def _cli(*args):
+def _cli(*args, env=None):
     return subprocess.run(
         [sys.executable, "-m", "blender_addon", "render", *map(str, args)],
-        cwd=ROOT, capture_output=True, text=True, timeout=300,
+        cwd=ROOT, capture_output=True, text=True, timeout=300, env=env,
     )
 
 
@@ -50,6 +50,19 @@ def test_cli_writes_a_png_and_prints_its_path_and_stage_times(small_blend, tmp_p
         assert tuple(image.size) == (40, 30)
     finally:
         bpy_module.data.images.remove(image)
+
+
+def test_cli_counts_the_kernels_it_compiles_and_compiles_none_the_second_time(small_blend, tmp_path):
+    env = dict(os.environ, GPUGI_KERNEL_CACHE=str(tmp_path / "kernels"))
+    first = _cli(small_blend, "-o", tmp_path / "first.png", "--samples", "1", env=env)
+    assert first.returncode == 0, first.stderr
+    counts = [line.split()[-1] for line in first.stderr.splitlines() if line.startswith("compiling kernels")]
+    assert counts, first.stderr
+    total = counts[-1].split("/")[1]
+    assert counts[-1] == f"{total}/{total}" and int(total) >= 3  # primitives, kd-tree, image at least
+    second = _cli(small_blend, "-o", tmp_path / "second.png", "--samples", "1", env=env)
+    assert second.returncode == 0, second.stderr
+    assert "compiling kernels" not in second.stderr
 
 
 def test_cli_writes_a_float_exr_at_the_asked_percentage(small_blend, tmp_path, bpy_module):

@@ -49,14 +49,31 @@ def _kernel_dir(path, expression="2.0f * (float)i + 1.0f", kernel=_KERNEL):
     return path
 
 
-def _run_probe(kernels, cache):
-    """Run _PROBE in a fresh process with its own kernel cache folder."""
+# a process that builds probe.cl from argv[1] whole, the way any other program would
+_FULL_BUILD = """
+import sys, pathlib
+import pyopencl as cl
+import gpu_core.device.programs as programs_module
+from gpu_core.device import get_device
+programs_module.INCLUDE_ROOT = pathlib.Path(sys.argv[1])
+dev = get_device()
+source = programs_module.load_source("probe.cl")
+cl.Program(dev.context, source).build(options=list(programs_module.build_options()))
+"""
+
+
+def _run_probe(kernels, cache, script=_PROBE, pocl_cache=None):
+    """Run ``script`` in a fresh process with its own kernel cache folder
+    (and its own PoCL cache folder, given one)."""
     env = dict(os.environ, GPUGI_KERNEL_CACHE=str(cache))
     env.pop("GPUGI_DEVICE", None)
-    out = subprocess.run([sys.executable, "-c", _PROBE, str(kernels)], cwd=ROOT, env=env,
+    if pocl_cache is not None:
+        env["POCL_CACHE_DIR"] = str(pocl_cache)
+    out = subprocess.run([sys.executable, "-c", script, str(kernels)], cwd=ROOT, env=env,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    lines = out.stdout.strip().splitlines()
+    return json.loads(lines[-1]) if lines else None
 
 
 # -- device choice ------------------------------------------------------------------
@@ -135,6 +152,16 @@ def test_second_process_loads_the_program_from_the_disk_cache(tmp_path):
     assert first == {"from_cache": [False], "values": [1.0, 3.0, 5.0, 7.0]}
     assert second == {"from_cache": [True], "values": [1.0, 3.0, 5.0, 7.0]}
     assert len(list(cache.glob("probe-*.bin"))) == 1
+
+
+def test_a_whole_build_of_the_same_source_elsewhere_does_not_spoil_the_cached_one(tmp_path):
+    # the driver's own cache may key a whole build and a compiled object alike
+    kernels = _kernel_dir(tmp_path / "kernels")
+    pocl_cache = tmp_path / "pocl"
+    _run_probe(kernels, tmp_path / "unused", script=_FULL_BUILD, pocl_cache=pocl_cache)
+    for cache_state in ("cold", "warm"):
+        result = _run_probe(kernels, tmp_path / "cache", pocl_cache=pocl_cache)
+        assert result["values"] == [1.0, 3.0, 5.0, 7.0], cache_state
 
 
 def test_editing_an_included_header_invalidates_the_cached_program(tmp_path):

@@ -173,3 +173,9 @@ __kernel void Cache_interpolate(const __global float4 *pos, const __global float
     out[i] = pick >= 0 ? (float4)(sirr[pick].xyz, 0.0f) : (float4)(0.0f);
     flag[i] = pick < 0 ? 0 : (compatible ? 2 : 3);
 }
+
+/* Flag 0..3 as a one-hot int4, for the host's count of each. */
+__kernel void Cache_flag_one_hot(const __global int *flag, const int n, __global int4 *out) {
+    int i = get_global_id(0);
+    if (i < n) out[i] = (int4)(flag[i] == 0, flag[i] == 1, flag[i] == 2, flag[i] == 3);
+}

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 import pyopencl as cl
-from pyopencl import cltypes
 
 from ...device import Device, primitives
 from ...device.layout import finite_rows, float4_rows
@@ -29,9 +28,16 @@ _MAX_R = 1e6  # samples and points (zero, negative or NaN R_j -> the minimum)
 _MAX_COVER = 2.0  # a coverage radius this large already spans the whole box
 
 
+_DEFINES = {"CACHE_MIN_R": f"{_MIN_R!r}f", "CACHE_MAX_R": f"{_MAX_R!r}f", "CACHE_MAX_COVER": f"{_MAX_COVER!r}f"}
+
+
+def programs() -> list[tuple[str, dict]]:
+    """The programs interpolation builds."""
+    return [(_PROGRAM, _DEFINES), ("gi/cache/grid.cl", {})]
+
+
 def _k(device: Device, name: str):
-    return device.kernel(_PROGRAM, name, {"CACHE_MIN_R": f"{_MIN_R!r}f", "CACHE_MAX_R": f"{_MAX_R!r}f",
-                                          "CACHE_MAX_COVER": f"{_MAX_COVER!r}f"})
+    return device.kernel(_PROGRAM, name, _DEFINES)
 
 
 def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr: cl.Buffer, srad: cl.Buffer,
@@ -85,11 +91,9 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
 
 def _flag_counts(device: Device, flag: cl.Buffer, n: int) -> np.ndarray:
     """How many points have each flag 0..3, counted on the device."""
-    count = primitives.reduction_kernel(
-        device, cltypes.int4, "(int4)(0)", "a + b", "(int4)(f[i] == 0, f[i] == 1, f[i] == 2, f[i] == 3)",
-        "__global const int *f")
-    result = count(device.view(flag, n, np.int32), range=slice(n), queue=device.queue)
-    return np.frombuffer(device.get(result).tobytes(), np.int32).copy()
+    one_hot = device.empty(16 * n)
+    _k(device, "Cache_flag_one_hot")(n, flag, np.int32(n), one_hot)
+    return primitives.sum_int4(device, one_hot, n)
 
 
 def interpolate(device: Device, samples_pos, samples_n, samples_E, samples_R, points, normals,

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
+from ...accel.point_tree_build import PROGRAM as POINT_TREE_BUILD
 from ...device import Device, primitives
 from ...device.layout import finite_rows, float4_rows
 from ...device.timer import StageTimer
@@ -24,6 +25,11 @@ from . import clusters as cache_clusters
 from . import seeding as cache_seeding
 from ..points import DevicePoints
 from .frame import Frame
+
+def programs() -> list[tuple[str, dict]]:
+    """The programs choosing samples builds (the k-means centres' tree included)."""
+    return [(name, {}) for name in ("gi/cache/frame.cl", "gi/cache/seeding.cl", POINT_TREE_BUILD, "gi/cache/clusters.cl")]
+
 
 ALPHA0 = 0.6  # default alpha times the largest side of the shading points' box
 MAX_ITERATIONS = 4  # default cap on k-means iterations (gains flatten out after 3-4)
