@@ -182,7 +182,7 @@ def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tup
     largest = max(n * 48, texels, film)
     if settings.mode == "gi":
         x0, y0, x1, y1 = window
-        slots = (x1 - x0) * (y1 - y0) * 4
+        slots = (x1 - x0) * (y1 - y0) * settings.gi_subpixels**2
         stored = 0
         if the_plan.photon_maps.get("global", "").startswith("built"):
             stored += photon_trace.STORE_GUESS * settings.global_photons

@@ -102,6 +102,13 @@ __kernel void Cut_lookup(CUT_PARAMS, const __global float4 *points, const __glob
     out[i] = (float4)(CutLookup_irradiance(&cut, points[i].xyz, normals[i].xyz), 0.0f);
 }
 
+/* Each node's irradiance plus its caustic estimate (the cut gathering reads). */
+__kernel void Cut_add_irradiance(const __global float4 *irradiance, const __global float4 *caustic, const int n,
+                                 __global float4 *out) {
+    int i = get_global_id(0);
+    if (i < n) out[i] = (float4)(irradiance[i].xyz + caustic[i].xyz, 0.0f);
+}
+
 /* ---- inputs of the host's reductions -------------------------------------- */
 
 /* Each node's depth (x), for the deepest level. */

@@ -26,7 +26,7 @@ The host reads back only a few counts and sums.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pyopencl as cl
@@ -103,6 +103,22 @@ class Cut:
             dev.kernel(_PROGRAM, "Cut_lookup", lookup_defines(self.k))(
                 n, *self.kernel_args(), dev.to_device(pts), dev.to_device(nrm), np.int32(n), out)
         return dev.read_xyz(out, n)
+
+
+def with_caustics(cut: Cut, caustic_map: PointTree | None, k: int) -> Cut:
+    """The cut as final gathering reads it: each node's irradiance plus the
+    caustic map's ``k``-photon estimate at its centre, so a gather hit looks
+    up one structure (the method of precomputed irradiance at photons: light
+    seen after a diffuse bounce is smooth at the cut's scale). Caustics seen
+    directly keep their own estimate per shading point. The same cut when
+    there is no caustic map."""
+    if caustic_map is None or caustic_map.point_count == 0 or cut.count == 0:
+        return cut
+    device, n = cut.device, cut.count
+    caustic, total = device.empty(16 * n), device.empty(16 * n)
+    caustic_map.irradiance_on_device(cut.centre, cut.normal, n, k, caustic)
+    device.kernel(_PROGRAM, "Cut_add_irradiance", lookup_defines(cut.k))(n, cut.irradiance, caustic, np.int32(n), total)
+    return replace(cut, irradiance=total, stats={**cut.stats, "caustics_in_nodes": True})
 
 
 def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_rounds: int = MAX_ROUNDS) -> Cut:

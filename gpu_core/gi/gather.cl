@@ -1,10 +1,11 @@
 /* Final gathering [WZPB09]: from every irradiance sample point, a
  * stratified set of cosine-distributed rays, followed through mirrors and
  * glass to their first diffuse hit y, where the radiance arriving is
- * albedo(y) / pi x E(y), E from the illumination cut (cut_lookup.h) plus,
- * with a caustic map, its density estimate. Emitters and the world are not
- * counted here: direct light is traced separately, and light reaching the
- * point from them through mirrors and glass comes from the caustic map.
+ * albedo(y) / pi x E(y), E from the illumination cut (cut_lookup.h; its
+ * nodes carry the caustic map's light too, gi/cut.py with_caustics).
+ * Emitters and the world are not counted here: direct light is traced
+ * separately, and light reaching the point from them through mirrors and
+ * glass comes from the caustic map.
  *
  * One work-group of GATHER_GROUP work-items per sample point: its rays are
  * spread over the group and reduced in local memory to the sample's
@@ -13,31 +14,14 @@
 #include "device/rng.h"
 #include "device/sampling.h"
 #include "shading/surface.h"
-#include "accel/point_density.h"
 #include "gi/cut_lookup.h"
-
-/* The caustic map (a point tree with photon attributes); has_caustics = 0
- * when there is none. */
-#define GATHER_CAUSTIC_PARAMS POINT_TREE_PARAMS_OF(cm), PHOTON_PARAMS_OF(cm), const int has_caustics
-
-/* Irradiance at a gather hit: the cut's, plus caustic light by density
- * estimation of k photons of the caustic map (which the global map leaves
- * out where there is one: a cut would smear it). */
-inline float3 Gather_irradiance(const Cut *cut, const PointTree *caustic_tree, const PhotonData *caustic_photons,
-                                bool has_caustics, int k, float3 y, float3 n) {
-    float3 e = CutLookup_irradiance(cut, y, n);
-    if (has_caustics)
-        e += Density_irradiance(caustic_tree, caustic_photons, y, n, k, INFINITY, PHOTON_FILTER_EPANECHNIKOV, 0.5f);
-    return e;
-}
 
 /* Ray r of sample s (at p, normal n): the radiance arriving along it (times
  * pi: albedo(y) E(y)), and the distance of its first hit (< 0 when it
  * reached no diffuse surface). The rays split the unit square into
  * strata x strata cells, one jittered point each. */
-inline float3 Gather_ray(const SceneView *sc, const Cut *cut, const PointTree *caustic_tree,
-                         const PhotonData *caustic_photons, bool has_caustics, int k, int max_specular, float3 p,
-                         float3 n, int s, int r, int strata, uint seed, float *distance) {
+inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, float3 p, float3 n, int s, int r,
+                         int strata, uint seed, float *distance) {
     float3 none = (float3)(0.0f);
     *distance = -1.0f;
     Rng rng = Rng_make((uint)s, (uint)r, seed);
@@ -59,7 +43,7 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, const PointTree *c
         if (diffuse > 0.0f) {
             *distance = first_t;
             float3 albedo = throughput * base * diffuse * m.base_color.w;
-            float3 e = Gather_irradiance(cut, caustic_tree, caustic_photons, has_caustics, k, sp.p, sp.ns);
+            float3 e = CutLookup_irradiance(cut, sp.p, sp.ns);
             e = (float3)(isfinite(e.x) ? e.x : 0.0f, isfinite(e.y) ? e.y : 0.0f, isfinite(e.z) ? e.z : 0.0f);
             return albedo * fmax(e, none);
         }
@@ -73,8 +57,7 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, const PointTree *c
 
 /* Work-group g gathers sample first + g. Outputs per sample: irradiance
  * (rgb), harmonic mean hit distance (INFINITY when no ray hit), hits. */
-__kernel void Gather_samples(SCENE_PARAMS, CUT_PARAMS, GATHER_CAUSTIC_PARAMS, const int k,
-                             const __global float4 *sample_pos, const __global float4 *sample_nrm,
+__kernel void Gather_samples(SCENE_PARAMS, CUT_PARAMS, const __global float4 *sample_pos, const __global float4 *sample_nrm,
                              const int first, const int sample_count, const int strata, const int max_specular,
                              const uint seed, __global float4 *out_irradiance, __global float *out_distance,
                              __global int *out_hits) {
@@ -88,13 +71,10 @@ __kernel void Gather_samples(SCENE_PARAMS, CUT_PARAMS, GATHER_CAUSTIC_PARAMS, co
     if (s < sample_count) {
         SceneView sc = SCENE_MAKE();
         Cut cut = CUT_MAKE();
-        PointTree caustic_tree = POINT_TREE_OF(cm);
-        PhotonData caustic_photons = PHOTON_DATA_OF(cm);
         float3 p = sample_pos[s].xyz, n = sample_nrm[s].xyz;
         for (int r = lid; r < rays; r += GATHER_GROUP) {
             float t;
-            sum += Gather_ray(&sc, &cut, &caustic_tree, &caustic_photons, has_caustics != 0, k, max_specular, p, n,
-                              s, r, strata, seed, &t);
+            sum += Gather_ray(&sc, &cut, max_specular, p, n, s, r, strata, seed, &t);
             if (t >= 0.0f) {
                 inv_distance += 1.0f / fmax(t, 1e-30f);
                 hits++;

@@ -3,7 +3,8 @@
 From each sample point, ``strata``² stratified cosine-distributed rays; the
 radiance arriving along a ray that hits a diffuse point y is
 albedo(y) / pi x E(y), with E(y) from the illumination cut (looked up on
-the device, inside the gather kernel) plus the caustic map's estimate.
+the device, inside the gather kernel; its nodes carry the caustic map's
+light too: cut.with_caustics).
 With cosine sampling the sample's irradiance is pi times the mean arriving
 radiance, i.e. the mean of albedo(y) E(y). Each sample also gets the
 harmonic mean distance R_j of its hits, which scales its interpolation
@@ -17,7 +18,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from ..accel.point_tree import PointTree
 from ..device import Device, primitives
 from ..scene.upload import SceneBuffers
 from .cut import Cut, lookup_defines
@@ -27,14 +27,14 @@ GROUP = 64  # work-items gathering one sample point
 _RAYS_PER_LAUNCH = 1 << 20  # gather rays per launch (bounds a launch's time)
 
 
-def _defines(device: Device, k: int, scene_defines: dict | None) -> dict:
+def _defines(device: Device, scene_defines: dict | None) -> dict:
     group = min(GROUP, int(device.device.max_work_group_size))
-    return {**(scene_defines or {}), **lookup_defines(k), "GATHER_GROUP": 1 << (group.bit_length() - 1)}
+    return {**(scene_defines or {}), **lookup_defines(0), "GATHER_GROUP": 1 << (group.bit_length() - 1)}
 
 
-def programs(device: Device, k: int, scene_defines: dict) -> list[tuple[str, dict]]:
+def programs(device: Device, scene_defines: dict) -> list[tuple[str, dict]]:
     """The programs gathering builds."""
-    return [(_PROGRAM, _defines(device, k, scene_defines))]
+    return [(_PROGRAM, _defines(device, scene_defines))]
 
 
 @dataclass
@@ -61,23 +61,20 @@ class GatherResult:
 
 
 def gather(device: Device, buffers: SceneBuffers, positions: cl.Buffer, normals: cl.Buffer, m: int, strata: int,
-           cut: Cut, caustic_map: PointTree | None, k: int, seed: int = 0, max_specular: int = 8,
-           scene_defines: dict | None = None) -> GatherResult:
+           cut: Cut, seed: int = 0, max_specular: int = 8, scene_defines: dict | None = None) -> GatherResult:
     """Irradiance at ``m`` sample points (float4 ``positions`` and unit
-    ``normals`` on the device, in the scene's device frame) from ``cut``
-    and the ``caustic_map`` (None for none), ``k`` photons per estimate."""
+    ``normals`` on the device, in the scene's device frame) from ``cut``."""
     strata = max(1, int(strata))
     rays = strata * strata
     e, distance, hits = device.empty(16 * m), device.empty(4 * m), device.empty(4 * m)
-    defines = _defines(device, k, scene_defines)
+    defines = _defines(device, scene_defines)
     group = defines["GATHER_GROUP"]
-    caustic = [*caustic_map.kernel_args(), *caustic_map.photon_args()] if caustic_map is not None else [None] * 5
     kernel = device.kernel(_PROGRAM, "Gather_samples", defines)
     per_launch = max(1, _RAYS_PER_LAUNCH // rays)
     for first in range(0, m, per_launch):
         count = min(per_launch, m - first)
-        kernel.groups(count, group, *buffers.kernel_args(), *cut.kernel_args(), *caustic,
-                      np.int32(caustic_map is not None), np.int32(k), positions, normals, np.int32(first), np.int32(m),
+        kernel.groups(count, group, *buffers.kernel_args(), *cut.kernel_args(), positions, normals, np.int32(first),
+                      np.int32(m),
                       np.int32(strata), np.int32(max_specular), np.uint32(seed & 0xFFFFFFFF), e, distance, hits)
     total_hits = primitives.sum_ints(device, hits, m)
     stats = {"samples": m, "rays_per_sample": rays, "hit_fraction": total_hits / max(m * rays, 1)}

@@ -4,7 +4,8 @@ stage on the device.
 Per render (the photon maps come from the renderer, traced or kept):
 shading points (each pixel's first diffuse hits); irradiance sample points
 chosen among them (adaptive seeding + k-means); the illumination cut of the
-global photon tree; final gathering at the sample points through the cut;
+global photon tree, its nodes also carrying the caustic map's light; final
+gathering at the sample points through the cut;
 lone outliers clamped; Ward interpolation to every shading point; caustics
 by density estimation of the caustic map at the shading points. Each stage
 reads the buffers the stage before wrote; the image kernel then reads the
@@ -56,7 +57,8 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     ``stages`` (the plan) says which cache stages run."""
     stats: dict = {"photons": maps.stats}
     with timer.stage("shading_points"):
-        points = shading_points.trace(device, buffers, window, settings.max_bounces, scene_defines=scene_defines)
+        points = shading_points.trace(device, buffers, window, settings.max_bounces, settings.gi_subpixels,
+                                        scene_defines)
     n = stats["shading_points"] = points.count
     indirect = caustic = None
     if "final_gather" in stages and n:
@@ -65,10 +67,11 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
                                     min(settings.cache_seeds, n), alpha=settings.cache_alpha, seed=settings.seed)
         with timer.stage("cut"):
             the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
+            gather_cut = cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k)
         with timer.stage("gather"):
             gathered = gather.gather(device, buffers, chosen.pos, chosen.nrm, chosen.count,
-                                     strata(settings.gather_rays), the_cut, maps.caustic_map, settings.photon_k,
-                                     settings.seed, settings.max_bounces, scene_defines)
+                                     strata(settings.gather_rays), gather_cut, settings.seed, settings.max_bounces,
+                                     scene_defines)
         with timer.stage("interpolate"):
             clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
             irradiance, interp = interpolation.interpolate_on_device(
@@ -91,7 +94,7 @@ def programs(device: Device, settings: RenderSettings, stages: list[str], scene_
     wanted = shading_points.programs(scene_defines)
     if "final_gather" in stages:
         wanted += samples.programs() + cut.programs(settings.photon_k)
-        wanted += gather.programs(device, settings.photon_k, scene_defines) + outliers.programs()
+        wanted += gather.programs(device, scene_defines) + outliers.programs()
         wanted += interpolation.programs()
     if "caustics" in stages:
         wanted += query_programs(settings.photon_k)

@@ -69,7 +69,7 @@ def test_gather_in_a_closed_box_returns_albedo_times_the_irradiance_it_is_given(
     pick = np.concatenate([on_edge[:20], rng.choice(len(points.positions), 20, replace=False)])
     result = gather.gather(device, up, device.to_device(float4_rows(points.positions[pick])),
                            device.to_device(float4_rows(points.normals[pick])), len(pick), 6,
-                           constant_cut(device, 2.0), None, k=16)
+                           constant_cut(device, 2.0))
     assert result.stats["hit_fraction"] == 1.0  # nothing escapes a closed box
     np.testing.assert_allclose(result.irradiance, 0.5 * 2.0, rtol=1e-5)
     # every hit lies inside the 2 m box, at most its diagonal away

@@ -13,7 +13,7 @@ from gpu_core.settings import MODES, PRESETS, RenderSettings, preset
 LADDER = ("draft", "preview", "final", "reference")
 # knobs where a higher step costs more and gives less error
 GROWING = ("samples", "diffuse_bounces", "global_photons", "caustic_photons", "photon_k", "cache_seeds",
-           "gather_rays")
+           "gather_rays", "gi_subpixels")
 
 
 def _scene():

@@ -1,0 +1,57 @@
+"""Launch discipline, counted in the kernel compiler's own cache: PoCL
+compiles a work-group function per kernel and launch shape, so renders of
+different sizes must add none, and a second process must compile nothing."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+SCENE = os.path.join(ROOT, "blend_scenes", "caustics.blend")  # every GI stage, the caustic map too
+
+
+def _render(tmp_path: Path, percentage: int) -> subprocess.CompletedProcess:
+    """The caustics scene, Draft, at ``percentage`` of its size, with this
+    test's own PoCL and GPU GI kernel caches."""
+    env = dict(os.environ, POCL_CACHE_DIR=str(tmp_path / "pocl"), GPUGI_KERNEL_CACHE=str(tmp_path / "kernels"))
+    env.pop("GPUGI_DEVICE", None)
+    run = subprocess.run([sys.executable, "-m", "blender_addon", "render", SCENE, "-o", str(tmp_path / f"{percentage}.png"),
+                          "--preset", "draft", "--resolution-percentage", str(percentage), "--device", "cpu"],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    return run
+
+
+def _variants(pocl_cache: Path) -> Counter:
+    """Work-group functions PoCL compiled, per (program, kernel): its cache
+    holds XX/PROGRAM/KERNEL/LOCALSIZE-... folders."""
+    return Counter((path.parent.parent.name, path.parent.name)
+                   for path in pocl_cache.glob("*/*/*/*") if path.is_dir())
+
+
+def _compiled_files(pocl_cache: Path) -> list[Path]:
+    """Every file PoCL's cache holds but its access stamps and scratch files."""
+    return sorted(path.relative_to(pocl_cache) for path in pocl_cache.rglob("*")
+                  if path.is_file() and path.name != "last_accessed" and not path.name.startswith("tempfile"))
+
+
+@pytest.mark.slow
+def test_renders_of_other_sizes_compile_no_kernel_and_no_work_group_variant(tmp_path):
+    first = _render(tmp_path, 10)
+    assert "compiling kernels" in first.stderr  # the caches started empty
+    after_first = _variants(tmp_path / "pocl")
+    files_after_first = _compiled_files(tmp_path / "pocl")
+    assert len(after_first) >= 40  # every stage's kernels ran
+    assert max(after_first.values()) == 1, [key for key, count in after_first.items() if count > 1]
+
+    # another process, another size: every program from the disk cache, every
+    # work-group function from PoCL's
+    second = _render(tmp_path, 25)
+    assert "compiling kernels" not in second.stderr
+    assert _compiled_files(tmp_path / "pocl") == files_after_first
