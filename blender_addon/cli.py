@@ -52,6 +52,10 @@ def _add_knob(parser, knob) -> None:
         parser.add_argument(option, choices=[value for value, _, _ in meta["items"]], default=None,
                             help=meta["description"])
         return
+    if isinstance(knob.default, bool):
+        parser.add_argument(option, action=argparse.BooleanOptionalAction, default=None,
+                            help=f"{meta['description']} (default in Blender: {'on' if meta['blender_default'] else 'off'})")
+        return
     kind = float if isinstance(knob.default, float) else int
     parser.add_argument(option, type=_bounded(kind, meta["minimum"], meta["maximum"]), default=None,
                         help=f"{meta['description']} (default {knob.default})")

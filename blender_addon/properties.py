@@ -60,6 +60,8 @@ def knob_property(f):
     if meta["items"]:
         items = [(value.upper(), label, description) for value, label, description in meta["items"]]
         return bpy.props.EnumProperty(items=items, default=meta["blender_default"].upper(), **common)
+    if isinstance(f.default, bool):
+        return bpy.props.BoolProperty(default=meta["blender_default"], **common)
     bounds = {key: meta[name] for key, name in (("min", "minimum"), ("max", "maximum"), ("soft_max", "soft_max"))
               if meta[name] is not None}
     kind = bpy.props.FloatProperty if isinstance(f.default, float) else bpy.props.IntProperty
@@ -101,7 +103,7 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
         """gpu_core settings for a final render, or for the viewport/previews."""
         values = {f.name: knob_value(self, f.name) for f in knobs()}
         if preview:
-            values["samples"] = values["preview_samples"]
+            values["samples"], values["denoise"] = values["preview_samples"], values["preview_denoise"]
         return RenderSettings(**values, transparent_background=transparent)
 
 

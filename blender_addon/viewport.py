@@ -2,7 +2,7 @@
 thread renders it, view_draw shows the latest image.
 
 The worker renders a coarse image first (a quarter of the resolution, one
-sample), then the full one; an edit or a view change stops it between two
+sample), then the full one (denoised when Denoise Viewport is on); an edit or a view change stops it between two
 kernel batches and starts it again. Nothing here touches Blender data: the
 engine passes exported scenes, cameras and settings in.
 """
@@ -127,11 +127,11 @@ class ViewportSession:
     def _work(self, job: Job, stop: threading.Event) -> None:
         try:
             renderer = self._renderer(job.device_spec)
-            for factor, samples, label in self._passes(job):
+            for factor, samples, denoise, label in self._passes(job):
                 if stop.is_set():
                     return
                 scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, factor))
-                settings = dataclasses.replace(job.settings, samples=samples)
+                settings = dataclasses.replace(job.settings, samples=samples, denoise=denoise)
                 result = renderer.render(scene, settings, should_stop=stop.is_set)
                 if stop.is_set():
                     return
@@ -149,10 +149,13 @@ class ViewportSession:
             self._fail(f"internal error ({type(err).__name__}): {err}")
 
     def _passes(self, job: Job):
-        """(resolution divisor, samples, label) of each image the worker renders."""
+        """(resolution divisor, samples, denoised, label) of each image the
+        worker renders: the coarse one never denoised, the full one when
+        the settings ask (Denoise Viewport)."""
         full = max(1, int(job.pixel_size))
-        yield COARSE_FACTOR * full, 1, "preview"
-        yield full, job.settings.samples, f"{job.settings.samples} samples"
+        yield COARSE_FACTOR * full, 1, False, "preview"
+        denoise = bool(job.settings.denoise)
+        yield full, job.settings.samples, denoise, f"{job.settings.samples} samples" + (", denoised" if denoise else "")
 
     def _renderer(self, device_spec):
         if device_spec not in self._renderers:

@@ -119,6 +119,8 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         if reused:
             reuse["photons"] = "neither the lit scene nor the photon settings changed"
         stages += _gi_stages(maps, reused)
+    if settings.denoise:
+        stages.append("denoise")
     if "geometry" not in changed:
         reuse["kdtree"] = "the triangles did not change"
     the_plan = Plan(

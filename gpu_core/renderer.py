@@ -8,20 +8,21 @@ build every program it needs (in parallel, progress reported); upload what
 changed (the kd-tree is built when the triangles changed); in GI mode,
 trace or keep the photon maps and run the GI stages (gi/pipeline.py); then
 the image kernel (image.py), in launches between which progress is
-reported and Esc is seen.
+reported and Esc is seen; then, when asked, the denoiser (denoise.py).
 """
 
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
+from .denoise import denoise
 from .device import Device
 from .device.timer import StageTimer
 from .errors import GpuGiError
 from .gi.pipeline import render_gi
-from .image import DENOISING_PASSES, LIGHT_PASSES, check_stop, render_image  # noqa: F401  (pass names)
+from .image import DENOISING_PASSES, LIGHT_PASSES, check_stop, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
 from .scene.model import Scene
@@ -54,6 +55,9 @@ class Renderer:
         """Render ``scene``; ``edits``, when the caller knows them, names the
         parts changed since this renderer's last render (scene/model.py PARTS)."""
         settings = (settings or RenderSettings()).validated()
+        keep_guides = settings.denoising_passes
+        if settings.denoise:  # the denoiser's guides are the denoising albedo and normal
+            settings = replace(settings, denoising_passes=True)
         timer = StageTimer(getattr(self.device, "queue", None))
         with timer.stage("validate"):
             scene = validate(scene)
@@ -79,8 +83,17 @@ class Renderer:
         with timer.stage("render"):
             passes, batches = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
                                            field_, progress, should_stop)
-        return RenderResult(passes=passes, stats=self._stats(scene, settings, the_plan, timer, batches, field_, moved),
-                            warnings=self._warnings(scene))
+        warnings, denoised = self._warnings(scene), False
+        if settings.denoise:
+            if progress is not None:
+                progress(1.0, "denoising")
+            with timer.stage("denoise"):
+                problem = _denoise(passes, settings.denoise_quality, keep_guides)
+            denoised = not problem
+            warnings += [problem] if problem else []
+        stats = self._stats(scene, settings, the_plan, timer, batches, field_, moved)
+        stats["denoised"] = denoised
+        return RenderResult(passes=passes, stats=stats, warnings=warnings)
 
     # -- stages ------------------------------------------------------------------
 
@@ -134,6 +147,20 @@ class Renderer:
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
         return warnings
+
+
+def _denoise(passes: dict, quality: str, keep_guides: bool) -> str:
+    """Denoise Combined in place from the denoising passes (dropped after,
+    unless asked for); what kept it from running ('' when it ran)."""
+    guides = [passes[name] for name in DENOISING_PASSES]
+    if not keep_guides:
+        for name in DENOISING_PASSES:
+            del passes[name]
+    try:
+        passes["Combined"] = denoise(passes["Combined"], guides[0], guides[1], quality)
+    except GpuGiError as err:
+        return f"{err}; the image is not denoised"
+    return ""
 
 
 class _Builds:

@@ -21,6 +21,11 @@ _MODE_ITEMS = (
     ("gi", "GI", "Photon maps, irradiance cache and final gathering: direct light and mirrors/glass traced, "
      "indirect light and caustics from photons; smooth at few samples"),
 )
+_DENOISE_QUALITY_ITEMS = (
+    ("high", "High", "The best Open Image Denoise gives"),
+    ("balanced", "Balanced", "Between High and Fast"),
+    ("fast", "Fast", "About half High's time, a little more error"),
+)
 _GI_ONLY = " (GI mode only)"
 
 
@@ -55,6 +60,13 @@ class RenderSettings:
     seed: int = knob(0, "Seed", "Noise pattern", panel="sampling", minimum=0)
     clamp: float = knob(0.0, "Clamp", "Largest radiance of one sample (0 disables clamping)", panel="sampling",
                         minimum=0.0)
+    denoise: bool = knob(False, "Denoise", "Final renders: Intel Open Image Denoise on the image, guided by the "
+                         "albedo and normal of each pixel's first diffuse surface (as Cycles' OpenImageDenoise)",
+                         panel="sampling", text="Denoise Render", blender_default=True)
+    preview_denoise: bool = knob(False, "Denoise Viewport", "The Rendered viewport: denoised once its samples are "
+                                 "done", panel="sampling", text="Denoise Viewport")
+    denoise_quality: str = knob("high", "Denoising Quality", "Open Image Denoise's quality: High is about twice "
+                                "as slow as Fast", panel="sampling", text="Quality", items=_DENOISE_QUALITY_ITEMS)
     max_bounces: int = knob(8, "Specular Bounces", "Mirror and glass bounces followed along camera, gather and "
                             "photon paths", panel="light_paths", text="Specular", minimum=0, maximum=64)
     diffuse_bounces: int = knob(0, "Diffuse Bounces", "Diffuse bounces path-traced after the first diffuse hit "
@@ -94,8 +106,8 @@ class RenderSettings:
         for f in fields(self):
             value = getattr(self, f.name)
             meta = f.metadata
-            if f.name == "mode":
-                value = value if value in MODES else "reference"
+            if meta.get("items"):
+                value = value if value in [item[0] for item in meta["items"]] else f.default
             elif isinstance(f.default, bool):
                 value = bool(value)
             elif isinstance(f.default, (int, float)):

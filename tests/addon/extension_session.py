@@ -68,7 +68,7 @@ preferences = bpy.context.preferences.addons[PACKAGE].preferences
 seen["preferences"] = type(preferences).__name__
 seen["devices"] = [device.label for device in sys.modules[PACKAGE + ".opencl_devices"].survey().devices]
 
-# F12 on the Cornell box, about 48 px wide, 2 samples of the path tracer
+# F12 on the Cornell box, about 48 px wide, 2 samples of the path tracer, denoised
 bpy.ops.wm.open_mainfile(filepath=BLEND)
 scene = bpy.context.scene
 scene.render.engine = "GPUGI"
@@ -77,7 +77,11 @@ seen["asked_width"] = scene.render.resolution_x * scene.render.resolution_percen
 scene.gpugi.mode = "REFERENCE"
 scene.gpugi.samples, scene.gpugi.diffuse_bounces = 2, 1
 rgba = render_pixels(scene, os.path.join(os.path.dirname(OUT_JSON), "render.exr"))
-seen["render_error"] = sys.modules[PACKAGE + ".final"].LAST_RUN.get("error", "")
+last_run = sys.modules[PACKAGE + ".final"].LAST_RUN
+seen["render_error"] = last_run.get("error", "")
+seen["render_warnings"] = last_run.get("warnings", [])
+seen["denoised"] = bool(last_run.get("stats", {}).get("denoised"))  # Denoise is on by default, as in Cycles
+seen["pyoidn"] = getattr(sys.modules.get("pyoidn"), "__file__", "")
 seen["image_shape"] = list(rgba.shape)
 seen["image_finite"] = bool(np.isfinite(rgba).all())
 seen["image_mean_rgb"] = float(rgba[..., :3].mean())

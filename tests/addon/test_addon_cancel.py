@@ -66,6 +66,7 @@ def probe_scene(bpy_empty, monkeypatch):
     scene.render.resolution_x = scene.render.resolution_y = 256
     scene.gpugi.samples = 2
     scene.gpugi.mode = "REFERENCE"  # progress is counted in kernel batches only
+    scene.gpugi.denoise = False  # (the denoiser reports its own step after them)
     scene.render.engine = GpuGiRenderEngine.bl_idname
     PROBES.clear()
     return scene

@@ -45,6 +45,8 @@ def test_cli_writes_a_png_and_prints_its_path_and_stage_times(small_blend, tmp_p
     assert f"image: {out}" in run.stdout
     stages = next(line for line in run.stdout.splitlines() if line.startswith("stages:"))
     assert "export" in stages and "render" in stages and "ms" in stages
+    plan = next(line for line in run.stdout.splitlines() if line.startswith("plan:"))
+    assert plan.endswith(", denoise") and "denoise" in stages  # on by default, as in Cycles
     image = bpy_module.data.images.load(str(out))
     try:
         assert tuple(image.size) == (40, 30)
@@ -67,8 +69,10 @@ def test_cli_counts_the_kernels_it_compiles_and_compiles_none_the_second_time(sm
 
 def test_cli_writes_a_float_exr_at_the_asked_percentage(small_blend, tmp_path, bpy_module):
     out = tmp_path / "out.exr"
-    run = _cli(small_blend, "-o", out, "--samples", "1", "--resolution-percentage", "50", "--device", "cpu")
+    run = _cli(small_blend, "-o", out, "--samples", "1", "--resolution-percentage", "50", "--device", "cpu",
+               "--no-denoise")
     assert run.returncode == 0, run.stderr
+    assert "denoise" not in next(line for line in run.stdout.splitlines() if line.startswith("plan:"))
     assert set(exr_channel_types(out).values()) == {np.dtype("<f4")}  # 32-bit float channels
     image = bpy_module.data.images.load(str(out))
     try:

@@ -120,6 +120,7 @@ def _plane_scene(bpy, case):
     scene.gpugi.samples = gpugi_samples
     scene.gpugi.mode = "REFERENCE"  # direct light only, like Cycles with max bounces 0
     scene.gpugi.diffuse_bounces = 0
+    scene.gpugi.denoise = False  # like Cycles here: light transport as rendered, pixel by pixel
     return scene
 
 

@@ -79,9 +79,10 @@ def test_linux_zip_holds_addon_gpu_core_kernels_and_its_wheels(linux_zip):
     assert manifest["permissions"]["files"]
     assert sorted(wheel.removeprefix("./wheels/") for wheel in manifest["wheels"]) == wheel_names(linux_zip)
     wheels = wheel_names(linux_zip)
-    for package in ("pyopencl", "siphash24", "markupsafe"):
+    for package in ("pyopencl", "siphash24", "cffi"):
         assert [w for w in wheels if re.match(rf"{package}-[^-]+-cp311-cp311-manylinux\S*_x86_64\.whl", w)], package
     assert [w for w in wheels if w.startswith("pocl_binary_distribution-")]
+    assert [w for w in wheels if w.startswith("pyoidn-")]  # the denoiser
     assert not [w for w in wheels if w.startswith("numpy")]  # Blender ships numpy
 
 
@@ -153,7 +154,9 @@ def test_installed_extension_imports_its_own_gpu_core_and_bundled_pyopencl(sessi
 
 @pytest.mark.slow
 def test_installed_extension_renders_and_caches_kernels_in_its_user_folder(session):
-    assert session["render_error"] == ""
+    assert session["render_error"] == "" and session["render_warnings"] == []
+    assert session["denoised"]  # by the bundled Open Image Denoise
+    assert Path(session["pyoidn"]).is_relative_to(Path(session["extensions"]) / ".local")
     assert 32 <= session["asked_width"] <= 64
     assert session["image_shape"][1] == session["asked_width"] and session["image_shape"][2] == 4
     assert session["image_finite"] and session["image_mean_rgb"] > 0.02
@@ -176,7 +179,7 @@ def test_uninstall_leaves_no_extension_files_user_data_or_wheels(session):
 
 
 @pytest.mark.slow
-def test_windows_and_macos_zips_carry_driver_opencl_wheels_only(tmp_path):
+def test_windows_and_macos_zips_carry_driver_opencl_wheels_and_the_denoiser_where_it_has_one(tmp_path):
     done = subprocess.run(
         [sys.executable, "-m", "blender_addon", "build-extension", "-o", str(tmp_path),
          "--platform", "windows-x64", "--platform", "macos-arm64"],
@@ -192,7 +195,10 @@ def test_windows_and_macos_zips_carry_driver_opencl_wheels_only(tmp_path):
             assert manifest["platforms"] == [platform.replace("_", "-")]
             assert manifest["blender_version_min"] == blender_min
             wheels = wheel_names(path)
-            for package in ("pyopencl", "siphash24", "markupsafe"):
+            compiled = ("pyopencl", "siphash24") + (("cffi",) if platform == "windows_x64" else ())
+            for package in compiled:
                 wheel = rf"{package}-[^-]+-{abi}-{abi}-{tag}\.whl"
                 assert [w for w in wheels if re.fullmatch(wheel, w)], (path, package)
             assert not [w for w in wheels if "pocl" in w or "manylinux" in w or "numpy" in w], wheels
+            # Open Image Denoise has Windows wheels, none for macOS on arm64
+            assert bool([w for w in wheels if w.startswith("pyoidn-")]) == (platform == "windows_x64"), wheels

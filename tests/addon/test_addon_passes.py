@@ -27,6 +27,7 @@ def _cornell(bpy, percent=12, samples=4):
     scene.render.resolution_percentage = percent
     scene.gpugi.mode = "REFERENCE"
     scene.gpugi.samples, scene.gpugi.diffuse_bounces = samples, 2
+    scene.gpugi.denoise = False  # the passes as rendered: they add up to Combined only so
     return scene
 
 

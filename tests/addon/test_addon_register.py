@@ -58,6 +58,16 @@ def test_scene_settings_reach_the_render_settings(bpy_empty):
     assert preview.samples == 2
 
 
+def test_denoising_is_on_for_renders_and_off_for_the_viewport_by_default_as_in_cycles(bpy_empty):
+    gpugi = bpy_empty.context.scene.gpugi
+    assert (gpugi.denoise, gpugi.preview_denoise, gpugi.denoise_quality) == (True, False, "HIGH")
+    assert gpugi.render_settings().denoise is True
+    assert gpugi.render_settings(preview=True).denoise is False
+    gpugi.preview_denoise, gpugi.denoise_quality = True, "FAST"
+    preview = gpugi.render_settings(preview=True)
+    assert preview.denoise is True and preview.denoise_quality == "fast"
+
+
 def test_stock_panels_are_enabled_for_the_engine(bpy_module):
     bpy = bpy_module
     for name in ("RENDER_PT_format", "RENDER_PT_output", "DATA_PT_lens", "DATA_PT_context_light", "DATA_PT_spot"):
@@ -158,7 +168,8 @@ def test_own_panels_draw_existing_settings(bpy_empty):
         drawn += layout.drawn
     assert {"mode", "preset", "samples", "preview_samples", "max_bounces", "diffuse_bounces", "clamp", "seed",
             "device", "film_transparent", "global_photons", "caustic_photons", "photon_k", "cache_seeds",
-            "gather_rays", "gi_subpixels", "cut_delta", "cache_alpha"} <= set(drawn)
+            "gather_rays", "gi_subpixels", "cut_delta", "cache_alpha", "denoise", "preview_denoise",
+            "denoise_quality"} <= set(drawn)
     # the Passes panel: every toggle of a pass this engine writes
     assert {"use_pass_z", "use_pass_normal", "use_pass_diffuse_direct", "use_pass_glossy_indirect",
             "use_pass_transmission_direct", "use_pass_emit", "use_pass_environment", "use_pass_caustics",

@@ -147,6 +147,7 @@ class FakeRenderer:
 
     def __init__(self, block=False, error=None):
         self.calls: list[tuple[int, int, int]] = []
+        self.denoised: list[bool] = []
         self.block = block
         self.error = error
         self.started = threading.Event()
@@ -154,6 +155,7 @@ class FakeRenderer:
     def render(self, scene, settings, progress=None, should_stop=None):
         cam = scene.camera
         self.calls.append((cam.width, cam.height, settings.samples))
+        self.denoised.append(settings.denoise)
         self.started.set()
         if self.error is not None:
             raise self.error
@@ -165,9 +167,9 @@ class FakeRenderer:
         return SimpleNamespace(passes={"Combined": image}, stats={"triangles": 2}, warnings=[])
 
 
-def _job(width=64, height=32, samples=8, pixel_size=1):
+def _job(width=64, height=32, samples=8, pixel_size=1, denoise=False):
     camera = dataclasses.replace(camera_looking_down(), width=width, height=height)
-    return Job(scene=plane_scene(Lights.make([]), camera), settings=RenderSettings(samples=samples),
+    return Job(scene=plane_scene(Lights.make([]), camera), settings=RenderSettings(samples=samples, denoise=denoise),
                device_spec=None, pixel_size=pixel_size)
 
 
@@ -193,6 +195,16 @@ def test_worker_renders_coarse_first_then_full_and_asks_for_redraws():
     image, version = session.latest()
     assert image.shape == (32, 64, 4) and version == 2 and len(redraws) == 2
     assert session.error is None
+
+
+@pytest.mark.parametrize("denoise", [False, True])
+def test_only_the_full_image_is_denoised_and_only_when_asked(denoise):
+    renderer = FakeRenderer()
+    session, _ = _session(renderer)
+    session.update_scene(_job(samples=8, denoise=denoise), signature=("view", 1))
+    _wait(session)
+    assert renderer.denoised == [False, denoise]
+    assert session.status.endswith("8 samples, denoised, 2 triangles" if denoise else "8 samples, 2 triangles")
 
 
 def test_pixel_size_preference_divides_the_full_resolution():

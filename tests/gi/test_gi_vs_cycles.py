@@ -1,4 +1,5 @@
-"""The GI mode's Final preset against stored Cycles references (64 x 64).
+"""The GI mode's Final preset, as rendered and denoised, against stored
+Cycles references (64 x 64).
 
 References: tests/references/*.npy, made by make_references.py (Cycles 5.0.1,
 4096 samples, box filter, no clamp, no glossy filter, deep bounces); two
@@ -32,8 +33,9 @@ def display(linear: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.cycles
+@pytest.mark.parametrize("denoise", [False, True], ids=["as_rendered", "denoised"])
 @pytest.mark.parametrize("name", ["cornell_box", "box_torus"])
-def test_final_preset_matches_the_cycles_reference(bpy_module, tmp_path, name):
+def test_final_preset_matches_the_cycles_reference(bpy_module, tmp_path, name, denoise):
     bpy = bpy_module
     reference = np.load(os.path.join(REFERENCES, f"{name}_64.npy")).astype(np.float64)
     bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_scenes", f"{name}.blend"))
@@ -43,6 +45,7 @@ def test_final_preset_matches_the_cycles_reference(bpy_module, tmp_path, name):
     scene.render.use_border = False
     scene.gpugi.preset = "FINAL"
     scene.gpugi.mode = "GI"
+    scene.gpugi.denoise = denoise
     ours = render_to_array(bpy, scene, "GPUGI", str(tmp_path / "gi.exr"))[..., :3].astype(np.float64)
     assert np.isfinite(ours).all()
     np.testing.assert_allclose(ours.mean(axis=(0, 1)), reference.mean(axis=(0, 1)), rtol=MEAN_TOLERANCE)

@@ -21,8 +21,9 @@ def _scene():
     return plane_scene(lights, camera_looking_down(size=8))
 
 
-def test_unknown_mode_is_validated_to_reference():
+def test_unknown_choices_are_validated_to_their_defaults():
     assert RenderSettings(mode="nonsense").validated().mode == "reference"
+    assert RenderSettings(denoise_quality="ultra").validated().denoise_quality == "high"  # any choice: its default
     assert set(MODES) == {"reference", "gi"}
 
 
