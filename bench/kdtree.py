@@ -9,9 +9,14 @@ warm-up. Embree (through ``embreex``) builds with its own threads;
 throughput is also measured on two forked processes, one per core, each
 tracing half of the rays.
 
+Then the worst cases for a kd-tree build, beside Embree's build of the same
+triangles: a soup of 41k random triangles overlapping across a tenth of
+the scene each, a fan of 4,096 triangles around one vertex and a stack of
+1,000 copies of one triangle.
+
     python bench/kdtree.py [--sizes 1000,10000] [--rays N] [--repeats N] [--quick]
 
-Prints the machine and a table, writes ``bench/results/kdtree.json`` and
+Prints the machine and the tables, writes ``bench/results/kdtree.json`` and
 the plot ``bench/figures/kdtree.png``.
 """
 
@@ -144,6 +149,40 @@ def embree_trace(scene, org, dirs, pool=None):
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
+def worst_cases() -> dict[str, np.ndarray]:
+    """Triangle sets that defeat spatial splits, (N, 3, 3) float32 each."""
+    rng = np.random.default_rng(7)
+    soup = rng.random((41_000, 1, 3)) + 0.15 * (rng.random((41_000, 3, 3)) - 0.5) * 2.0
+    ring = np.linspace(0.0, 2.0 * np.pi, 4_097)
+    rim = np.stack([np.cos(ring), np.sin(ring), np.full_like(ring, 0.1)], -1)
+    fan = np.stack([np.zeros((4_096, 3)), rim[:-1], rim[1:]], 1)
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    stack = tri[None] + np.linspace(0.0, 1e-3, 1_000)[:, None, None] * np.array([0.0, 0.0, 1.0])
+    return {"soup of 41k overlapping triangles": soup, "fan of 4,096 triangles": fan,
+            "stack of 1,000 triangles": stack}
+
+
+def measure_worst(device, name: str, tris: np.ndarray, repeats: int) -> dict:
+    """Our build against Embree's on one worst case."""
+    tris = np.ascontiguousarray(tris, np.float32)
+    build_ms, tree = median_ms(lambda: kdtree.build(device, tris), repeats)
+    commits = [embree_build(tris)[2] for _ in range(repeats + 1)][1:]
+    stats = tree.stats
+    return {"case": name, "triangles": len(tris), "build_ms": build_ms, "embree_build_ms": statistics.median(commits),
+            "leaf_references": stats["leaf_references"], "max_leaf_size": stats["max_leaf_size"],
+            "depth": stats["depth"], "large_levels": stats["large_levels"]}
+
+
+def worst_table(rows) -> str:
+    head = ("case", "build ms", "Embree ms", "ratio", "leaf refs / triangle", "largest leaf", "depth")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        lines.append(f"| {r['case']} | {r['build_ms']:.1f} | {r['embree_build_ms']:.1f} | "
+                     f"{r['build_ms'] / r['embree_build_ms']:.1f} | {r['leaf_references'] / r['triangles']:.1f} | "
+                     f"{r['max_leaf_size']} | {r['depth']} |")
+    return "\n".join(lines)
+
+
 # ---- one size ---------------------------------------------------------------------------
 
 
@@ -261,11 +300,15 @@ def main(argv=None) -> int:
     print(table(rows))
     print("ratio: ours / Embree (build: lower is better; throughput, against Embree's faster of 1 thread"
           " and 2 processes: higher is better)")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({"machine": describe(device), "rays": args.rays, "repeats": args.repeats,
-                                   "rows": rows}, indent=1))
-    plot(rows, FIGURE)
-    print(f"wrote {RESULTS.relative_to(ROOT)} and {FIGURE.relative_to(ROOT)}")
+    worst = [measure_worst(device, name, tris, args.repeats) for name, tris in worst_cases().items()]
+    print(worst_table(worst))
+    suffix = "_quick" if args.quick else ""
+    results, figure = (path.with_name(path.stem + suffix + path.suffix) for path in (RESULTS, FIGURE))
+    results.parent.mkdir(parents=True, exist_ok=True)
+    results.write_text(json.dumps({"machine": describe(device), "rays": args.rays, "repeats": args.repeats,
+                                   "rows": rows, "worst_cases": worst}, indent=1))
+    plot(rows, figure)
+    print(f"wrote {results.relative_to(ROOT)} and {figure.relative_to(ROOT)}")
     return 0
 
 

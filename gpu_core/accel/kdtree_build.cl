@@ -8,16 +8,18 @@
  *   (axis or KD_LEAF, left record or leaf offset, right record or leaf
  *   size, depth), rec_split its plane. The output stage turns records into
  *   the preorder KdNode array (device/structs.h).
- * Large node: (element start, element count, record, depth) in an int4,
- *   with its cell beside it. Small node: (small root, record) and a 64-bit
+ * Large node: (element start, element count, record, depth | bad << 16)
+ *   in an int4, with its cell beside it; "bad" counts the splits on its
+ *   path that did not pay (KdBuild_pays). Small node: (small root, record) and a 64-bit
  *   mask of the small root's elements it holds.
  *
  * Defines from the host: KD_CHUNK (elements per chunk, a power of two),
  * KD_SMALL (largest small node, at most 64), KD_EMPTY_RATIO (empty-space
  * cut threshold), KD_COST_TRAVERSE (SAH cost of a node step, in triangle
- * tests), KD_SAH_GROUP (work-group size of the SAH search) and
- * KD_SAH_LANES (its work-items per node, a power of two dividing
- * KD_SAH_GROUP). */
+ * tests), KD_BAD_SPLITS (splits that do not pay allowed on a path before its
+ * large nodes become leaves), KD_SAH_GROUP (work-group size of the SAH
+ * search) and KD_SAH_LANES (its work-items per node, a power of two
+ * dividing KD_SAH_GROUP). */
 #include "device/structs.h"
 #include "accel/kdtree_clip.h"
 
@@ -37,6 +39,27 @@
 inline float KdBuild_area(float4 lo, float4 hi) {
     float4 d = hi - lo;
     return 2.0f * (d.x * d.y + d.y * d.z + d.z * d.x);
+}
+
+/* Depth and count of unpaid splits of a large node (its info.w). */
+inline int KdBuild_depth(int4 info) { return info.w & 0xffff; }
+inline int KdBuild_bad(int4 info) { return info.w >> 16; }
+
+/* Whether a spatial-median split of a cell holding `total` elements into
+ * children of `counts` pays: one child holds fewer than all of them, and
+ * by the SAH, C_t + (A_l n_l + A_r n_r) / A is below the leaf's n. Near a
+ * fan's centre and in a stack of triangles one child keeps them all; a
+ * soup of triangles large against the cell does not pay by the SAH.
+ * Empty-space cuts always pay. */
+inline bool KdBuild_pays(float4 lo, float4 hi, int mode, float plane, int2 counts, int total) {
+    int axis = mode & 3;
+    if ((mode >> 2) != KD_SPLIT_MEDIAN) return true;
+    if (max(counts.x, counts.y) >= total) return false;
+    float area = KdBuild_area(lo, hi);
+    if (!(area > 0.0f)) return true;
+    float left = KdBuild_area(lo, Axis_with(hi, axis, plane));
+    float right = KdBuild_area(Axis_with(lo, axis, plane), hi);
+    return KD_COST_TRAVERSE + (left * (float)counts.x + right * (float)counts.y) / area < (float)total;
 }
 
 /* Sides of the plane an element with bounds [lo, hi] on the split axis
@@ -245,13 +268,23 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
     flags[e] = (long)(sides & 1) | ((long)(sides >> 1) << 32);
 }
 
+/* Whether a large child of node `info` becomes a leaf: at the depth limit,
+ * when the level's element budget is spent (force_leaf), or past
+ * KD_BAD_SPLITS splits that did not pay on its path. */
+inline bool KdBuild_large_leaf(int4 info, bool pays, int max_depth, int force_leaf) {
+    return KdBuild_depth(info) + 1 >= max_depth || force_leaf || KdBuild_bad(info) + !pays > KD_BAD_SPLITS;
+}
+
 /* Per node: the element counts of its two children (from the scan of the
  * element flags), each child's class, and the node's contribution to the
  * level's counters: (large elements, small elements, leaf elements, large
  * nodes, small roots, new records, 0, 0). A child is an empty leaf when it
- * has no element, a small root with at most KD_SMALL, a leaf at the depth
- * limit (or when force_leaf is set), else a large node. */
-__kernel void KdBuild_large_children(const __global int4 *act_info,
+ * has no element, a small root with at most KD_SMALL, a leaf by
+ * KdBuild_large_leaf, else a large node. */
+__kernel void KdBuild_large_children(const __global float4 *act_lo,
+                                     const __global float4 *act_hi,
+                                     const __global int4 *act_info,
+                                     const __global float *node_split,
                                      const __global int *node_mode,
                                      const __global long *flag_scan,
                                      const __global long *flag_total,
@@ -267,9 +300,12 @@ __kernel void KdBuild_large_children(const __global int4 *act_info,
     int2 counts = (int2)((int)(sum & 0xffffffffL), (int)(sum >> 32));
     node_counts[i] = counts;
     int8 c = (int8)(0);
-    if ((node_mode[i] >> 2) == KD_SPLIT_NONE) {
+    int mode = node_mode[i];
+    if ((mode >> 2) == KD_SPLIT_NONE) {
         c.s2 = counts.x;
     } else {
+        bool leaves = KdBuild_large_leaf(info, KdBuild_pays(act_lo[i], act_hi[i], mode, node_split[i], counts, info.y),
+                                         max_depth, force_leaf);
         c.s5 = 2;
         for (int side = 0; side < 2; ++side) {
             int count = side == 0 ? counts.x : counts.y;
@@ -277,7 +313,7 @@ __kernel void KdBuild_large_children(const __global int4 *act_info,
             if (count <= KD_SMALL) {
                 c.s1 += count;
                 c.s4 += 1;
-            } else if (info.w + 1 >= max_depth || force_leaf) {
+            } else if (leaves) {
                 c.s2 += count;
             } else {
                 c.s0 += count;
@@ -310,7 +346,7 @@ __kernel void KdBuild_large_emit(
     int8 base = counter_scan[i];
     int mode = node_mode[i];
     int axis = mode & 3;
-    int depth = info.w;
+    int depth = KdBuild_depth(info);
     if ((mode >> 2) == KD_SPLIT_NONE) {
         rec_info[info.z] = (int4)(KD_LEAF, leaf_base + base.s2, info.y, depth);
         node_dest[i] = (int4)(KD_DEST_LEAF, leaf_base + base.s2, KD_DEST_NONE, 0);
@@ -318,6 +354,9 @@ __kernel void KdBuild_large_emit(
     }
     float plane = node_split[i];
     int2 counts = node_counts[i];
+    bool pays = KdBuild_pays(act_lo[i], act_hi[i], mode, plane, counts, info.y);
+    bool leaves = KdBuild_large_leaf(info, pays, max_depth, force_leaf);
+    int bad = KdBuild_bad(info) + !pays;
     int left = rec_base + base.s5;
     rec_info[info.z] = (int4)(axis, left, left + 1, depth);
     rec_split[info.z] = plane;
@@ -340,7 +379,7 @@ __kernel void KdBuild_large_emit(
             small_roots[root_base + base.s4] = (int4)(at, count, child, 0);
             base.s1 += count;
             base.s4 += 1;
-        } else if (depth + 1 >= max_depth || force_leaf) {
+        } else if (leaves) {
             kind = KD_DEST_LEAF;
             at = leaf_base + base.s2;
             rec_info[child] = (int4)(KD_LEAF, at, count, depth + 1);
@@ -350,7 +389,7 @@ __kernel void KdBuild_large_emit(
             at = base.s0;
             next_lo[base.s3] = lo;
             next_hi[base.s3] = hi;
-            next_info[base.s3] = (int4)(at, count, child, depth + 1);
+            next_info[base.s3] = (int4)(at, count, child, (depth + 1) | (bad << 16));
             base.s0 += count;
             base.s3 += 1;
         }

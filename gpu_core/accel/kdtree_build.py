@@ -5,7 +5,10 @@ counts (scan totals) to size the next level's arrays:
 
 * large-node stage: chunk bounds, node bounds, empty-space cut or spatial
   median split, triangles clipped to the children, counts and compaction
-  by prefix sums; children with at most ``SMALL`` triangles become small roots;
+  by prefix sums; children with at most ``SMALL`` triangles become small
+  roots; past ``BAD_SPLITS`` median splits that did not pay by the SAH on
+  a path (a fan of triangles around one vertex, a stack, a soup of large
+  triangles: the children keep most of them) larger ones become leaves;
 * small-node stage: candidate planes and their 64-bit side masks per small
   root, the SAH of every candidate of every node (a work-item per node on a
   CPU, a work-group per node elsewhere), a leaf where not splitting is
@@ -34,6 +37,7 @@ CHUNK = 256  # elements per chunk of the large-node stage
 SMALL = 64  # largest small node (the width of its element mask)
 EMPTY_RATIO = 0.25  # empty fraction of a side that is cut off
 COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests
+BAD_SPLITS = 2  # large-node splits that do not pay by the SAH allowed on a path (fans, stacks, soups)
 SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
 PROGRAM = "accel/kdtree_build.cl"
@@ -74,7 +78,8 @@ class _Config:
         self.sah_lanes = min(sah_lanes, self.sah_group)
         self.defines = {
             "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
-            "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_SAH_GROUP": self.sah_group, "KD_SAH_LANES": self.sah_lanes,
+            "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
+            "KD_SAH_LANES": self.sah_lanes,
         }
 
 
@@ -197,7 +202,8 @@ class _Build:
         budget = ELEMENT_BUDGET * self.count + 65536
         for force_leaf in (0, 1):
             self.kernel("KdBuild_large_children")(
-                active, self.act_info.data, node_mode.data, flag_scan.data, total_l.data, i32(elements), i32(active),
+                active, self.act_lo.data, self.act_hi.data, self.act_info.data, node_split.data, node_mode.data,
+                flag_scan.data, total_l.data, i32(elements), i32(active),
                 i32(self.max_depth), i32(force_leaf), node_counts.data, counters.data)
             primitives.scan(dev, counters.data, active, "int8", out=counter_scan.data, total=total_8.data)
             totals = _values(dev, total_8, np.int32)

@@ -14,7 +14,7 @@ import pytest
 from pyopencl import cltypes
 
 from gpu_core.accel import kdtree
-from gpu_core.accel.kdtree_build import COST_TRAVERSE, SAH_GROUP, SMALL, build_tree, depth_limit
+from gpu_core.accel.kdtree_build import BAD_SPLITS, COST_TRAVERSE, SAH_GROUP, SMALL, build_tree, depth_limit
 
 MARGIN = 1e-5  # leaf cells shrink by this fraction of the scene size before the overlap test
 
@@ -63,8 +63,23 @@ def big_and_small():
     return np.concatenate([big, random_soup(1500, seed=4, size=0.02)])
 
 
+def fan(n, height=0.2):
+    """``n`` triangles around one vertex (a cone's side: a UV sphere's pole, a cylinder's cap)."""
+    a = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    ring = np.stack([np.cos(a), np.sin(a), np.full_like(a, height)], -1)
+    return np.stack([np.zeros((n, 3)), ring[:-1], ring[1:]], 1).astype(np.float32)
+
+
+def stack(n):
+    """``n`` copies of one triangle, each a micron above the last."""
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    return (tri[None] + np.linspace(0.0, 1e-6 * n, n)[:, None, None] * [0, 0, 1]).astype(np.float32)
+
+
 SCENES = {
     "random_soup": lambda: random_soup(2000),
+    "fan": lambda: fan(300),
+    "stack": lambda: stack(200),
     "sphere": sphere,
     "box_grid": box_grid,
     "big_and_small": big_and_small,
@@ -291,6 +306,21 @@ def test_small_scenes_skip_the_large_stage(device):
     stats = kdtree.build(device, random_soup(SMALL, seed=2)).stats
     assert stats["large_levels"] == 0
     assert stats["small_roots"] == 1
+
+
+def test_a_fan_stops_splitting_before_the_depth_limit(device):
+    # every median split through a fan's centre keeps all the triangles
+    # there on both sides; after BAD_SPLITS such splits a path ends in leaves
+    tris = fan(2000)
+    stats = kdtree.build(device, tris).stats
+    assert stats["depth"] < depth_limit(len(tris))
+
+
+def test_a_stack_of_triangles_ends_in_leaves_after_the_unpaid_splits(device):
+    # no split of a stack pays: at most BAD_SPLITS + 1 levels of them copy it
+    tris = stack(500)
+    stats = kdtree.build(device, tris).stats
+    assert stats["leaf_references"] <= 2 ** (BAD_SPLITS + 1) * len(tris)
 
 
 def test_leaves_stay_small_where_triangles_are_separable(device):
