@@ -9,15 +9,15 @@
  *   size, depth), rec_split its plane. The output stage turns records into
  *   the preorder KdNode array (device/structs.h).
  * Large node: (element start, element count, record, depth | bad << 16)
- *   in an int4, with its cell beside it; "bad" counts the splits on its
- *   path that did not pay (KdBuild_pays). Small node: (small root, record) and a 64-bit
+ *   in an int4, with its cell beside it; "bad" counts the median splits
+ *   just above it that made no progress (KdBuild_child_bad). Small node: (small root, record) and a 64-bit
  *   mask of the small root's elements it holds.
  *
  * Defines from the host: KD_CHUNK (elements per chunk, a power of two),
  * KD_SMALL (largest small node, at most 64), KD_EMPTY_RATIO (empty-space
  * cut threshold), KD_COST_TRAVERSE (SAH cost of a node step, in triangle
- * tests), KD_BAD_SPLITS (splits that do not pay allowed on a path before its
- * large nodes become leaves), KD_SAH_GROUP (work-group size of the SAH
+ * tests), KD_BAD_SPLITS (median splits in a row without progress allowed
+ * before a large node becomes a leaf), KD_SAH_GROUP (work-group size of the SAH
  * search) and KD_SAH_LANES (its work-items per node, a power of two
  * dividing KD_SAH_GROUP). */
 #include "device/structs.h"
@@ -46,20 +46,27 @@ inline int KdBuild_depth(int4 info) { return info.w & 0xffff; }
 inline int KdBuild_bad(int4 info) { return info.w >> 16; }
 
 /* Whether a spatial-median split of a cell holding `total` elements into
- * children of `counts` pays: one child holds fewer than all of them, and
- * by the SAH, C_t + (A_l n_l + A_r n_r) / A is below the leaf's n. Near a
- * fan's centre and in a stack of triangles one child keeps them all; a
- * soup of triangles large against the cell does not pay by the SAH.
- * Empty-space cuts always pay. */
-inline bool KdBuild_pays(float4 lo, float4 hi, int mode, float plane, int2 counts, int total) {
-    int axis = mode & 3;
-    if ((mode >> 2) != KD_SPLIT_MEDIAN) return true;
-    if (max(counts.x, counts.y) >= total) return false;
+ * children of `counts` pays by the SAH: C_t + (A_l n_l + A_r n_r) / A
+ * below the leaf's n. A soup of triangles large against the cell and a
+ * stack of triangles do not pay. */
+inline bool KdBuild_pays(float4 lo, float4 hi, int axis, float plane, int2 counts, int total) {
     float area = KdBuild_area(lo, hi);
     if (!(area > 0.0f)) return true;
     float left = KdBuild_area(lo, Axis_with(hi, axis, plane));
     float right = KdBuild_area(Axis_with(lo, axis, plane), hi);
     return KD_COST_TRAVERSE + (left * (float)counts.x + right * (float)counts.y) / area < (float)total;
+}
+
+/* A child's count of median splits in a row that made no progress for it:
+ * the split did not pay, or the child kept every element of its parent
+ * while its sibling kept more than half (the cells around a fan's centre,
+ * a stack of triangles). Any other median split starts it again from 0 (an
+ * object over a floor: the object's side keeps all, the other only the
+ * floor); empty-space cuts pass it on. */
+inline int KdBuild_child_bad(int4 info, int mode, bool pays, int2 counts, int count) {
+    if ((mode >> 2) != KD_SPLIT_MEDIAN) return KdBuild_bad(info);
+    bool stuck = count >= info.y && 2 * min(counts.x, counts.y) > info.y;
+    return (!pays || stuck) ? KdBuild_bad(info) + 1 : 0;
 }
 
 /* Sides of the plane an element with bounds [lo, hi] on the split axis
@@ -270,9 +277,15 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
 
 /* Whether a large child of node `info` becomes a leaf: at the depth limit,
  * when the level's element budget is spent (force_leaf), or past
- * KD_BAD_SPLITS splits that did not pay on its path. */
-inline bool KdBuild_large_leaf(int4 info, bool pays, int max_depth, int force_leaf) {
-    return KdBuild_depth(info) + 1 >= max_depth || force_leaf || KdBuild_bad(info) + !pays > KD_BAD_SPLITS;
+ * KD_BAD_SPLITS median splits in a row without progress (`bad`). */
+inline bool KdBuild_large_leaf(int4 info, int bad, int max_depth, int force_leaf) {
+    return KdBuild_depth(info) + 1 >= max_depth || force_leaf || bad > KD_BAD_SPLITS;
+}
+
+/* Whether a median split of node i pays (see KdBuild_pays); cuts always do. */
+inline bool KdBuild_split_pays(const __global float4 *act_lo, const __global float4 *act_hi, int i, int mode,
+                               float plane, int2 counts, int total) {
+    return (mode >> 2) != KD_SPLIT_MEDIAN || KdBuild_pays(act_lo[i], act_hi[i], mode & 3, plane, counts, total);
 }
 
 /* Per node: the element counts of its two children (from the scan of the
@@ -304,8 +317,7 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
     if ((mode >> 2) == KD_SPLIT_NONE) {
         c.s2 = counts.x;
     } else {
-        bool leaves = KdBuild_large_leaf(info, KdBuild_pays(act_lo[i], act_hi[i], mode, node_split[i], counts, info.y),
-                                         max_depth, force_leaf);
+        bool pays = KdBuild_split_pays(act_lo, act_hi, i, mode, node_split[i], counts, info.y);
         c.s5 = 2;
         for (int side = 0; side < 2; ++side) {
             int count = side == 0 ? counts.x : counts.y;
@@ -313,7 +325,7 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
             if (count <= KD_SMALL) {
                 c.s1 += count;
                 c.s4 += 1;
-            } else if (leaves) {
+            } else if (KdBuild_large_leaf(info, KdBuild_child_bad(info, mode, pays, counts, count), max_depth, force_leaf)) {
                 c.s2 += count;
             } else {
                 c.s0 += count;
@@ -354,9 +366,7 @@ __kernel void KdBuild_large_emit(
     }
     float plane = node_split[i];
     int2 counts = node_counts[i];
-    bool pays = KdBuild_pays(act_lo[i], act_hi[i], mode, plane, counts, info.y);
-    bool leaves = KdBuild_large_leaf(info, pays, max_depth, force_leaf);
-    int bad = KdBuild_bad(info) + !pays;
+    bool pays = KdBuild_split_pays(act_lo, act_hi, i, mode, plane, counts, info.y);
     int left = rec_base + base.s5;
     rec_info[info.z] = (int4)(axis, left, left + 1, depth);
     rec_split[info.z] = plane;
@@ -371,6 +381,7 @@ __kernel void KdBuild_large_emit(
         rec_hi[child] = hi;
         rec_info[child] = (int4)(KD_LEAF, 0, 0, depth + 1);
         int kind = KD_DEST_NONE, at = 0;
+        int bad = KdBuild_child_bad(info, mode, pays, counts, count);
         if (count == 0) {
             /* an empty leaf */
         } else if (count <= KD_SMALL) {
@@ -379,7 +390,7 @@ __kernel void KdBuild_large_emit(
             small_roots[root_base + base.s4] = (int4)(at, count, child, 0);
             base.s1 += count;
             base.s4 += 1;
-        } else if (leaves) {
+        } else if (KdBuild_large_leaf(info, bad, max_depth, force_leaf)) {
             kind = KD_DEST_LEAF;
             at = leaf_base + base.s2;
             rec_info[child] = (int4)(KD_LEAF, at, count, depth + 1);

@@ -6,9 +6,10 @@ counts (scan totals) to size the next level's arrays:
 * large-node stage: chunk bounds, node bounds, empty-space cut or spatial
   median split, triangles clipped to the children, counts and compaction
   by prefix sums; children with at most ``SMALL`` triangles become small
-  roots; past ``BAD_SPLITS`` median splits that did not pay by the SAH on
-  a path (a fan of triangles around one vertex, a stack, a soup of large
-  triangles: the children keep most of them) larger ones become leaves;
+  roots; a larger child becomes a leaf after more than ``BAD_SPLITS``
+  median splits in a row that made no progress for it (it kept all its
+  parent's triangles, as around a fan's centre or in a stack, or the
+  split did not pay by the SAH);
 * small-node stage: candidate planes and their 64-bit side masks per small
   root, the SAH of every candidate of every node (a work-item per node on a
   CPU, a work-group per node elsewhere), a leaf where not splitting is
@@ -37,7 +38,7 @@ CHUNK = 256  # elements per chunk of the large-node stage
 SMALL = 64  # largest small node (the width of its element mask)
 EMPTY_RATIO = 0.25  # empty fraction of a side that is cut off
 COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests
-BAD_SPLITS = 2  # large-node splits that do not pay by the SAH allowed on a path (fans, stacks, soups)
+BAD_SPLITS = 2  # median splits in a row without progress allowed before a large node is a leaf (fans, stacks)
 SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
 PROGRAM = "accel/kdtree_build.cl"

@@ -70,7 +70,6 @@ PRIM_SCAN(int8, int8)
     }
 
 #define PRIM_ADD(a, b) ((a) + (b))
-PRIM_REDUCE(long, sum_long, 0L, PRIM_ADD)
 PRIM_REDUCE(int4, sum_int4, (int4)(0), PRIM_ADD)
 PRIM_REDUCE(int4, max_int4, (int4)(INT_MIN), max)
 PRIM_REDUCE(float4, min_float4, (float4)(INFINITY), fmin)

@@ -89,10 +89,6 @@ def _reduce(device: Device, name: str, values: cl.Buffer, n: int, dtype) -> np.n
         values, n = partial, chunks
 
 
-def sum_long(device: Device, values: cl.Buffer, n: int) -> int:
-    return int(_reduce(device, "sum_long", values, n, np.int64)) if n > 0 else 0
-
-
 def sum_int4(device: Device, values: cl.Buffer, n: int) -> np.ndarray:
     """Lane sums of ``n`` int4 values."""
     return _reduce(device, "sum_int4", values, n, np.dtype((np.int32, 4))) if n > 0 else np.zeros(4, np.int32)

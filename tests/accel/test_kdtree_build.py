@@ -323,6 +323,15 @@ def test_a_stack_of_triangles_ends_in_leaves_after_the_unpaid_splits(device):
     assert stats["leaf_references"] <= 2 ** (BAD_SPLITS + 1) * len(tris)
 
 
+def test_an_object_over_a_wide_floor_keeps_small_leaves(device):
+    # the object's side of each split keeps the floor and the whole object
+    # until the cells shrink to the object: progress all the same
+    floor = np.array([[[-20, -20, 0], [20, -20, 0], [20, 20, 0]], [[-20, -20, 0], [20, 20, 0], [-20, 20, 0]]])
+    ball = 0.5 * sphere(16, 32) + np.array([3.0, 2.0, 0.6])
+    stats = kdtree.build(device, np.concatenate([floor, ball]).astype(np.float32)).stats
+    assert stats["max_leaf_size"] <= SMALL // 2  # a leaf of the whole ball would hold 1,024
+
+
 def test_leaves_stay_small_where_triangles_are_separable(device):
     # well-separated tiny triangles: the SAH should isolate them in few-triangle leaves
     tris = random_soup(4000, seed=6, size=0.001)
