@@ -8,7 +8,8 @@ milliseconds (the render's stats). In the same run Cycles renders the same
 scene and size at the preset's samples (set up like the trade-off
 benchmark's: box filter, no clamp, deep bounces, no denoiser), median of
 ``--repeats``. The Reference preset (1024 samples) is rendered once at each
-size, and only at the sizes in ``--reference-sizes``.
+size, and only at the sizes in ``--reference-sizes`` and for the scenes
+in ``--reference-scenes`` (Cycles takes minutes at 1024 samples).
 
 A newcomer's first frame, with every cache empty (ours and PoCL's), is
 timed once per scene at the first size, Preview, in a fresh process: the
@@ -22,10 +23,11 @@ per second on the same image; ours counted on the kernel's own time and on
 the render call's, Cycles' on the render call's.
 
     python bench/frame.py [--scenes cornell_box ...] [--sizes 256 512]
-        [--presets draft preview final reference] [--repeats 3] [--no-cold] [--no-paths] [--quick]
+        [--presets draft preview final reference] [--reference-scenes ...] [--repeats 3] [--no-cold] [--no-paths]
+        [--tag TAG] [--quick]
 
-Writes bench/results/frame.json and frame.txt and the plot
-bench/figures/frame.png (stages of the first size's Preview frame).
+Writes bench/results/frame[_TAG].json and .txt and the plot
+bench/figures/frame[_TAG].png (stages of the first size's Preview frame).
 """
 
 from __future__ import annotations
@@ -170,10 +172,12 @@ def main() -> None:
     parser.add_argument("--sizes", nargs="+", type=int, default=[256, 512])
     parser.add_argument("--presets", nargs="+", default=list(PRESETS), choices=PRESETS)
     parser.add_argument("--reference-sizes", nargs="*", type=int, default=[256])
+    parser.add_argument("--reference-scenes", nargs="*", default=["box_torus", "caustics", "cornell_box"])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-cold", action="store_true", help="skip the first frames with empty caches")
     parser.add_argument("--no-paths", action="store_true", help="skip the image kernel's paths per second")
     parser.add_argument("--quick", action="store_true", help="the Cornell box at 128 px, Preview, one repeat")
+    parser.add_argument("--tag", default="", help="suffix of the output files (frame_TAG.txt), for partial runs")
     parser.add_argument("--first-frame", nargs=2, metavar=("SCENE", "SIZE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.first_frame:
@@ -206,7 +210,8 @@ def main() -> None:
             lines.append(line)
         for size in args.sizes:
             for preset in args.presets:
-                if preset == "reference" and size not in args.reference_sizes:
+                if preset == "reference" and (size not in args.reference_sizes
+                                              or name not in args.reference_scenes):
                     continue
                 repeats = 1 if preset == "reference" else args.repeats
                 result = ours(bpy, name, size, preset, repeats)
@@ -219,7 +224,7 @@ def main() -> None:
                 print(line, flush=True)
                 lines.append(line)
     os.makedirs(RESULTS, exist_ok=True)
-    suffix = "_quick" if args.quick else ""
+    suffix = "_quick" if args.quick else f"_{args.tag}" if args.tag else ""
     with open(os.path.join(RESULTS, f"frame{suffix}.json"), "w") as f:
         json.dump(dict(machine=lines[0], rows=rows, first_frames=firsts, paths=rates), f, indent=1)
     with open(os.path.join(RESULTS, f"frame{suffix}.txt"), "w") as f:

@@ -10,6 +10,18 @@
 #include "shading/surface.h"
 
 #define IMAGE_MAX_PASSTHROUGH 64
+#define IMAGE_ALL_LIGHTS 4 /* up to this many lights, every one gets a shadow ray */
+
+/* A path's light is summed per light pass only where the render asks for
+ * the passes (IMAGE_LIGHT_PASSES); else in one sum, Combined, which keeps
+ * the path's private state small. */
+#ifdef IMAGE_LIGHT_PASSES
+#define IMAGE_SLOTS PASS_COUNT
+#define IMAGE_SUMMED PASS_SUMMED
+#else
+#define IMAGE_SLOTS 1
+#define IMAGE_SUMMED 1
+#endif
 #define IMAGE_GI_MIN_COS 0.7f /* a shading point stands for surfaces facing within about 45 degrees */
 
 /* The GI cache as the image reads it: per slot of the shading-point grid
@@ -39,21 +51,46 @@ inline float Image_visibility(const SceneView *sc, float3 org, float3 dir, float
 #endif
 }
 
-/* Direct light at a diffuse point from every light, world included:
- * light_samples shadow rays per light, averaged. Shadow rays leave from just
- * above the surface on the side the path arrived from (ng). */
+/* Light from one light sample of light l at a diffuse point, seen through
+ * the scene (shadow rays leave from org, above the surface). */
+inline float3 Image_light_sample(const SceneView *sc, const Light *l, float3 org, float3 ns, Rng *rng) {
+    float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
+    /* sample from the offset origin so the shadow ray ends at the light */
+    LightSample ls = Light_sample(l, &sc->em, org, ns, u0, u1, u2);
+    if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f) || !(ls.dist > 0.0f)) return (float3)(0.0f);
+    return ls.value * Image_visibility(sc, org, ls.dir, ls.dist);
+}
+
+/* The light row a shadow ray goes to with many lights: picked by u in
+ * proportion to the power it emits (Light.pick, the inclusive CDF); its
+ * probability in *p. */
+inline int Image_pick_light(const SceneView *sc, float u, float *p) {
+    int i = 0;
+    while (i < sc->light_count - 1 && sc->lights[i].pick <= u) ++i;
+    *p = sc->lights[i].pick - (i > 0 ? sc->lights[i - 1].pick : 0.0f);
+    return i;
+}
+
+/* Direct light at a diffuse point, world included: light_samples rounds,
+ * averaged. With up to IMAGE_ALL_LIGHTS lights a round sends a shadow ray
+ * to every light (the least noise for the rays); with more, one ray to one
+ * light picked by power, so a frame's cost does not grow with the number of
+ * lights. Shadow rays leave from just above the surface on the side the
+ * path arrived from (ng). */
 inline float3 Image_direct(const SceneView *sc, const SurfacePoint *sp, int light_samples, Rng *rng) {
     float3 sum = (float3)(0.0f);
     float3 org = sp->p + sp->eps * sp->ng;
     bool has_world = Scene_has_world(sc);
     for (int k = 0; k < light_samples; ++k) {
-        for (int i = 0; i < sc->light_count; ++i) {
-            Light l = sc->lights[i];
-            float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
-            /* sample from the offset origin so the shadow ray ends at the light */
-            LightSample ls = Light_sample(&l, &sc->em, org, sp->ns, u0, u1, u2);
-            if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f) || !(ls.dist > 0.0f)) continue;
-            sum += ls.value * Image_visibility(sc, org, ls.dir, ls.dist);
+        if (sc->light_count <= IMAGE_ALL_LIGHTS) {
+            for (int i = 0; i < sc->light_count; ++i) {
+                Light l = sc->lights[i];
+                sum += Image_light_sample(sc, &l, org, sp->ns, rng);
+            }
+        } else {
+            float p;
+            Light l = sc->lights[Image_pick_light(sc, Rng_next(rng), &p)];
+            if (p > 0.0f) sum += Image_light_sample(sc, &l, org, sp->ns, rng) / p;
         }
         if (has_world) {
             LightSample ls = Light_sample_world(sc->world.xyz, sp->ns, Rng_next(rng), Rng_next(rng));
@@ -85,9 +122,13 @@ inline float3 Image_lights_seen(const SceneView *sc, float3 org, float3 dir, flo
  * ray can sample). Add light c, which arrived after `events` scattering
  * events, to its pass. */
 inline void Image_add(float3 *light, float3 c, int first_pass, int events, bool environment, bool caustic) {
+#ifdef IMAGE_LIGHT_PASSES
     int p = events == 0 ? (environment ? PASS_ENVIRONMENT : PASS_EMISSION) : first_pass + (events > 1 ? 1 : 0);
     light[p] += c;
     if (caustic) light[PASS_CAUSTICS] += c;
+#else
+    light[0] += c;
+#endif
 }
 
 #ifdef IMAGE_GI
@@ -131,7 +172,7 @@ inline float3 Image_to_camera(const Camera *cam, float3 d) {
 
 /* What one camera path brings its pixel. */
 typedef struct {
-    float3 light[PASS_COUNT]; /* by pass */
+    float3 light[IMAGE_SLOTS]; /* by pass (or one sum) */
     float alpha;              /* 0 where a transparent film shows the world */
     float3 albedo;            /* denoising albedo: at the first diffuse event, or the world */
     float3 feature_normal;    /* denoising normal (camera space), at the first diffuse event */
@@ -224,7 +265,7 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
                        int wx, int wy, float px, float py, Rng *rng, ImagePath *path) {
     ImageState st = {.throughput = (float3)(1.0f), .first_pass = PASS_DIFFUSE};
     Camera_ray(cam, px, py, &st.org, &st.dir, &st.tmin, &st.tmax);
-    for (int p = 0; p < PASS_COUNT; ++p) path->light[p] = (float3)(0.0f);
+    for (int p = 0; p < IMAGE_SLOTS; ++p) path->light[p] = (float3)(0.0f);
     path->alpha = 1.0f;
     path->albedo = path->feature_normal = path->normal = (float3)(0.0f);
     path->depth = 1e10f;
@@ -276,11 +317,25 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
  * dropped. */
 inline void Image_accumulate(const ImagePath *path, float clamp_value, float3 *pixel_light) {
     float3 radiance = (float3)(0.0f);
-    for (int p = 0; p < PASS_SUMMED; ++p) radiance += path->light[p];
+    for (int p = 0; p < IMAGE_SUMMED; ++p) radiance += path->light[p];
     if (!(isfinite(radiance.x) && isfinite(radiance.y) && isfinite(radiance.z))) return;
     float3 scale = (float3)(1.0f);
     if (clamp_value > 0.0f) scale = fmin(radiance, (float3)(clamp_value)) / fmax(radiance, (float3)(1e-30f));
-    for (int p = 0; p < PASS_COUNT; ++p) pixel_light[p] += path->light[p] * scale;
+    for (int p = 0; p < IMAGE_SLOTS; ++p) pixel_light[p] += path->light[p] * scale;
+}
+
+/* Pixel order: launches take the window's pixels in strips of IMAGE_STRIP
+ * rows, column by column within a strip, so that a work-group's work-items
+ * cover a block of the image rather than a line (IMAGE_STRIP 1: rows). The
+ * g-th pixel of the window in that order, as (x, y). */
+#ifndef IMAGE_STRIP
+#define IMAGE_STRIP 8
+#endif
+inline int2 Image_pixel_of(int g, int w, int h) {
+    int strip = g / (w * IMAGE_STRIP);
+    int rows = min(IMAGE_STRIP, h - strip * IMAGE_STRIP);
+    int k = g - strip * w * IMAGE_STRIP;
+    return (int2)(k / rows, strip * IMAGE_STRIP + k % rows);
 }
 
 /* One work item per pixel of the launch (job.window: width, height, pixels
@@ -291,16 +346,18 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, IMAGE_GI_PARAMS, __
                            __global float *out_depth, __global float4 *out_normal, __global float4 *out_light,
                            __global float4 *out_albedo, __global float4 *out_feature_normal) {
     int i = get_global_id(0);
-    int g = job.window.w + i; /* index in the render window */
+    int g = job.window.w + i; /* index in the render window, in pixel order */
     int window_pixels = job.window.x * job.window.y;
     if (i >= job.window.z || g >= window_pixels) return;
     SceneView sc = SCENE_MAKE();
     Camera cam = *sc.camera;
-    int wx = g % job.window.x, wy = g / job.window.x;
+    int2 wp = Image_pixel_of(g, job.window.x, job.window.y);
+    int wx = wp.x, wy = wp.y;
+    int o = wy * job.window.x + wx; /* where the pixel's outputs go (rows) */
     int px = job.origin.x + wx, py = job.origin.y + wy;
 
-    float3 pixel_light[PASS_COUNT];
-    for (int p = 0; p < PASS_COUNT; ++p) pixel_light[p] = (float3)(0.0f);
+    float3 pixel_light[IMAGE_SLOTS];
+    for (int p = 0; p < IMAGE_SLOTS; ++p) pixel_light[p] = (float3)(0.0f);
     float alpha_sum = 0.0f;
     float3 albedo_sum = (float3)(0.0f), feature_normal_sum = (float3)(0.0f);
     float depth = 1e10f;
@@ -327,15 +384,15 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, IMAGE_GI_PARAMS, __
     }
     float inv = 1.0f / (float)job.samples;
     float3 total = (float3)(0.0f);
-    for (int p = 0; p < PASS_SUMMED; ++p) total += pixel_light[p];
-    out_combined[g] = (float4)(total * inv, alpha_sum * inv);
-    out_depth[g] = depth;
-    out_normal[g] = (float4)(normal, 0.0f);
-    if (job.outputs & OUTPUT_LIGHT_PASSES) {
-        for (int p = 0; p < PASS_COUNT; ++p) out_light[p * window_pixels + g] = (float4)(pixel_light[p] * inv, 0.0f);
-    }
+    for (int p = 0; p < IMAGE_SUMMED; ++p) total += pixel_light[p];
+    out_combined[o] = (float4)(total * inv, alpha_sum * inv);
+    out_depth[o] = depth;
+    out_normal[o] = (float4)(normal, 0.0f);
+#ifdef IMAGE_LIGHT_PASSES
+    for (int p = 0; p < PASS_COUNT; ++p) out_light[p * window_pixels + o] = (float4)(pixel_light[p] * inv, 0.0f);
+#endif
     if (job.outputs & OUTPUT_DENOISING) {
-        out_albedo[g] = (float4)(albedo_sum * inv, 0.0f);
-        out_feature_normal[g] = (float4)(feature_normal_sum * inv, 0.0f);
+        out_albedo[o] = (float4)(albedo_sum * inv, 0.0f);
+        out_feature_normal[o] = (float4)(feature_normal_sum * inv, 0.0f);
     }
 }

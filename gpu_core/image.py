@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from .device import Device
-from .device.constants import OUTPUT_DENOISING, OUTPUT_LIGHT_PASSES, PASS_COUNT
+from .device.constants import OUTPUT_DENOISING, PASS_COUNT
 from .device.layout import IMAGE_JOB_DTYPE
 from .errors import RenderCancelled
 from .scene.model import Scene
@@ -72,7 +72,7 @@ def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: 
     x0, y0, x1, y1 = scene.camera.pixel_window
     w, h = x1 - x0, y1 - y0
     total = w * h
-    outputs = (OUTPUT_LIGHT_PASSES if settings.light_passes else 0) | (OUTPUT_DENOISING if settings.denoising_passes else 0)
+    outputs = OUTPUT_DENOISING if settings.denoising_passes else 0
     combined, depth, normal = device.empty(total * 16), device.empty(total * 4), device.empty(total * 16)
     # passes nobody asked for get a stand-in the kernel never writes
     light = device.empty(total * 16 * len(LIGHT_PASSES) if settings.light_passes else 16)

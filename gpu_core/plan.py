@@ -108,6 +108,8 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if "alpha_shadows" in stages:
         scene_defines["SCENE_HAS_ALPHA"] = 1
     image_defines = dict(scene_defines)
+    if "light_passes" in stages:
+        image_defines["IMAGE_LIGHT_PASSES"] = 1
     emitters, maps, photon_key, reuse, reused = [], {}, None, {}, False
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1

@@ -37,9 +37,9 @@ PASS_CAUSTICS = 8
 PASS_SUMMED = 8  # passes before this one add up to Combined
 PASS_COUNT = 9
 
-# what the image kernel writes besides Combined, Depth and Normal (flags)
-OUTPUT_LIGHT_PASSES = 1
-OUTPUT_DENOISING = 2
+# what the image kernel writes besides Combined, Depth and Normal (flags; the
+# light passes are the plan's IMAGE_LIGHT_PASSES define)
+OUTPUT_DENOISING = 1
 
 # photon tracing (photons/photon_trace.cl, photons/photon_emit.h)
 PHOTON_PASS_GLOBAL = 0  # every diffuse hit but those of caustic paths

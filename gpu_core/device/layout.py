@@ -94,7 +94,8 @@ LIGHT = Struct("Light", "a light row; derived values are computed on the host in
     ("sun_norm", "float", "sun: 2 / (1 + cos_half), so the disk gives S at normal incidence"),
     ("kind", "int", "LIGHT_*"),
     ("shape", "int", "area: AREA_RECTANGLE or AREA_ELLIPSE"),
-    ("pad", "int", "", 2),
+    ("pick", "float", "inclusive CDF of picking this light for a shadow ray, by the power it emits"),
+    ("pad", "int"),
 ])
 
 CAMERA = Struct("Camera", "the camera", [

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..device.constants import LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN, PHOTON_EMITTER_WORLD
+from ..device.constants import LIGHT_SPOT, PHOTON_EMITTER_WORLD
 from ..device.layout import EMITTER_DTYPE
 from ..scene.model import Scene
-from ..scene.tables import SceneTables
+from ..scene.tables import SceneTables, emitted_power
 
 
 @dataclass
@@ -29,50 +29,24 @@ class Emitter:
     carried: np.ndarray
 
 
-def spot_power(power: np.ndarray, cos_half: float, spot_smooth: float) -> np.ndarray:
-    """Power a spot light emits: P / (4 pi) times the integral of its
-    smoothstep falloff over the sphere, 2 pi int smoothstep((c - cos_half) s) dc."""
-    width = 1.0 - cos_half
-    a = min(width * spot_smooth, 1.0)
-    ramp = (a**3 - 0.5 * a**4) / spot_smooth  # the smoothstep's rise
-    flat = max(width - 1.0 / spot_smooth, 0.0)  # where it is 1
-    return np.asarray(power, np.float64) * 0.5 * (ramp + flat)
-
-
 def emitter_powers(scene: Scene, tables: SceneTables) -> list[Emitter]:
     """Every emitter with power, from the scene's light table; the sun and
     the world cover the scene's bounding sphere."""
     radius = tables.radius
+    emitted = emitted_power(scene, tables.lights, radius, tables.emit_tris)
     out = []
     for row, light in enumerate(tables.lights):
-        kind, power = int(light["kind"]), light["power"][:3].astype(np.float64)
-        carried = None
-        if kind in (LIGHT_POINT, LIGHT_AREA):
-            total = power
-        elif kind == LIGHT_SPOT:
-            total = spot_power(power, float(light["cos_half"]), float(light["spot_smooth"]))
-            carried = power * 0.5 * (1.0 - float(light["cos_half"]))  # P / (4 pi) x the cone's solid angle
-        elif kind == LIGHT_SUN:
-            total = power * np.pi * radius**2
-        elif kind == LIGHT_MESH:
-            total = _mesh_power(scene, tables)
-        else:
-            continue
+        total = emitted[row]
         if np.sum(total) > 0:
-            out.append(Emitter(row, total, total if carried is None else carried))
+            carried = total
+            if int(light["kind"]) == LIGHT_SPOT:  # P / (4 pi) x the cone's solid angle
+                carried = light["power"][:3].astype(np.float64) * 0.5 * (1.0 - float(light["cos_half"]))
+            out.append(Emitter(row, total, carried))
     world = np.asarray(scene.world_color, np.float64)
     if np.sum(world) > 0:
         total = 4.0 * np.pi**2 * radius**2 * world
         out.append(Emitter(PHOTON_EMITTER_WORLD, total, total))
     return out
-
-
-def _mesh_power(scene: Scene, tables: SceneTables) -> np.ndarray:
-    """Both faces of every emissive triangle: sum of 2 pi A L_e."""
-    tris = scene.triangles[tables.emit_tris]
-    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-    emission = tables.materials["emission"][:, :3].astype(np.float64)[scene.material_ids[tables.emit_tris]]
-    return 2.0 * np.pi * (area[:, None] * emission).sum(axis=0)
 
 
 def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:

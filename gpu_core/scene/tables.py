@@ -52,7 +52,7 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
     else:
         materials, atlas, infos = old.materials, old.atlas, old.texture_infos
     if old is None or changed & {"lights", "geometry", "materials"}:
-        lights = light_table(scene, center, has_mesh_lights=len(emit_tris) > 0)
+        lights = light_table(scene, center, radius, emit_tris)
     else:
         lights = old.lights
     camera = camera_struct(scene, center) if old is None or "camera" in changed else old.camera
@@ -97,16 +97,29 @@ def emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return ids, cdf
 
 
-def light_table(scene: Scene, center: np.ndarray, has_mesh_lights: bool) -> np.ndarray:
-    """Device light rows in Cycles' units (see shading/lights.h); emissive
-    meshes add one LIGHT_MESH row. Derived values are computed in float64."""
+def light_table(scene: Scene, center: np.ndarray, radius: float, emit_tris: np.ndarray) -> np.ndarray:
+    """Device light rows in Cycles' units (see shading/lights.h); the
+    emissive triangles ``emit_tris`` add one LIGHT_MESH row. Derived values
+    are computed in float64. Each row's pick is the inclusive CDF of
+    choosing it for a shadow ray, in proportion to the power it emits."""
     lights = scene.lights
     n = len(lights)
-    table = np.zeros(n + (1 if has_mesh_lights else 0), LIGHT_DTYPE)
-    if has_mesh_lights:
+    table = np.zeros(n + (1 if len(emit_tris) else 0), LIGHT_DTYPE)
+    if len(emit_tris):
         table["kind"][n] = LIGHT_MESH
-    if not n:
-        return table
+    if n:
+        _light_rows(scene, center, table)
+    weight = emitted_power(scene, table, radius, emit_tris).sum(axis=1)
+    if len(table) and weight.sum() > 0:
+        table["pick"] = np.cumsum(weight) / weight.sum()
+        table["pick"][-1] = 1.0
+    return table
+
+
+def _light_rows(scene: Scene, center: np.ndarray, table: np.ndarray) -> None:
+    """Fill the first rows of ``table`` from the scene's lights."""
+    lights = scene.lights
+    n = len(lights)
     kind = lights.kind
     power = finite(lights.power)
     direction = finite(lights.direction)
@@ -155,7 +168,42 @@ def light_table(scene: Scene, center: np.ndarray, has_mesh_lights: bool) -> np.n
     table["sun_norm"][:n] = sun_norm
     table["kind"][:n] = kind
     table["shape"][:n] = lights.shape
-    return table
+
+
+def emitted_power(scene: Scene, table: np.ndarray, radius: float, emit_tris: np.ndarray) -> np.ndarray:
+    """(N, 3) float64: the rgb watts each light row emits. A sun's is what
+    falls on the scene's bounding disk (radius ``radius``); the mesh row's,
+    both faces of every emissive triangle."""
+    out = np.zeros((len(table), 3))
+    for row, light in enumerate(table):
+        kind, power = int(light["kind"]), light["power"][:3].astype(np.float64)
+        if kind in (LIGHT_POINT, LIGHT_AREA):
+            out[row] = power
+        elif kind == LIGHT_SPOT:
+            out[row] = spot_power(power, float(light["cos_half"]), float(light["spot_smooth"]))
+        elif kind == LIGHT_SUN:
+            out[row] = power * np.pi * radius**2
+        elif kind == LIGHT_MESH:
+            out[row] = mesh_power(scene, emit_tris)
+    return out
+
+
+def spot_power(power: np.ndarray, cos_half: float, spot_smooth: float) -> np.ndarray:
+    """Power a spot light emits: P / (4 pi) times the integral of its
+    smoothstep falloff over the sphere, 2 pi int smoothstep((c - cos_half) s) dc."""
+    width = 1.0 - cos_half
+    a = min(width * spot_smooth, 1.0)
+    ramp = (a**3 - 0.5 * a**4) / spot_smooth  # the smoothstep's rise
+    flat = max(width - 1.0 / spot_smooth, 0.0)  # where it is 1
+    return np.asarray(power, np.float64) * 0.5 * (ramp + flat)
+
+
+def mesh_power(scene: Scene, emit_tris: np.ndarray) -> np.ndarray:
+    """Both faces of every emissive triangle: sum of 2 pi A L_e."""
+    tris = scene.triangles[emit_tris]
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    emission = emission_radiance(scene).astype(np.float64)[scene.material_ids[emit_tris]]
+    return 2.0 * np.pi * (area[:, None] * emission).sum(axis=0)
 
 
 def finite(values) -> np.ndarray:

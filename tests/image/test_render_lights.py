@@ -256,3 +256,42 @@ def test_more_light_samples_lower_the_noise(device):
     err_one = np.sqrt(np.mean((one - reference) ** 2))
     err_eight = np.sqrt(np.mean((eight - reference) ** 2))
     assert err_eight < 0.55 * err_one  # 1/sqrt(8) = 0.35 for independent samples
+
+
+def hard_point_lights_radiance(positions, powers):
+    """Plane radiance under hard point lights: ALBEDO/pi * sum P/(4 pi d^2) cos."""
+
+    def radiance(x, y):
+        total = np.zeros_like(x)
+        for pos, power in zip(positions, powers):
+            d = np.stack([pos[0] - x, pos[1] - y, np.full_like(x, pos[2])], -1)
+            d2 = (d**2).sum(-1)
+            total += power / (4 * np.pi * d2) * d[..., 2] / np.sqrt(d2)
+        return ALBEDO / np.pi * total
+
+    return footprint_average(radiance, sub=2)
+
+
+def test_many_lights_picked_by_power_give_the_sum_of_their_light(device):
+    # more lights than get a shadow ray each (IMAGE_ALL_LIGHTS): one light
+    # per shadow ray, picked by power, must still add up to every light's
+    rng = np.random.default_rng(3)
+    positions = np.column_stack([rng.uniform(-2, 2, 12), rng.uniform(-2, 2, 12), rng.uniform(0.8, 2.0, 12)])
+    powers = rng.uniform(5.0, 60.0, 12)
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=p, power=(w,) * 3) for p, w in zip(positions, powers)])
+    img = render(device, plane_scene(lights, camera_looking_down(HEIGHT, HALF, SIZE)), samples=256)[..., 0]
+    expected = hard_point_lights_radiance(positions, powers)
+    assert np.all(np.isfinite(img))
+    assert abs(img.mean() / expected.mean() - 1) < 0.01
+    np.testing.assert_allclose(blocks(img), blocks(expected), rtol=0.05)
+
+
+def test_many_lights_of_which_some_emit_nothing_stay_finite_and_right(device):
+    # lights without power are never picked; they must not divide by zero
+    positions = [(x, y, 1.5) for x in (-1.0, 0.0, 1.0) for y in (-1.0, 1.0)] + [(0.0, 0.0, 1.0)]
+    powers = [0.0, 40.0, 0.0, 0.0, 25.0, 0.0, 0.0]
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=p, power=(w,) * 3) for p, w in zip(positions, powers)])
+    img = render(device, plane_scene(lights, camera_looking_down(HEIGHT, HALF, SIZE)), samples=128)[..., 0]
+    expected = hard_point_lights_radiance(positions, powers)
+    assert np.all(np.isfinite(img))
+    assert abs(img.mean() / expected.mean() - 1) < 0.01
