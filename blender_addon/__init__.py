@@ -76,9 +76,10 @@ def unregister():
         return
     import bpy
 
-    from . import cache_dirs, preferences, properties, ui
+    from . import cache_dirs, final, preferences, properties, ui
     from .engine import GpuGiRenderEngine
 
+    final.release_held()
     preferences.unregister()
     ui.unregister()
     bpy.utils.unregister_class(GpuGiRenderEngine)

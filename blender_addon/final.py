@@ -6,6 +6,7 @@ polled between them), then write the passes into Blender's render result.
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import Callable
 
@@ -24,6 +25,11 @@ LAST_RUN: dict = {}
 # Called with each status line a render shows ("compiling kernels 3/9"):
 # the command line prints them.
 STATUS_LISTENERS: list[Callable[[str], None]] = []
+# With Blender's Persistent Data on, the renderer of each scene stays between
+# renders (an animation's frames), holding what a later render can reuse:
+# the scene on the device, the kd-tree, the photon maps.
+_HELD: dict[str, object] = {}
+_HELD_LOCK = threading.Lock()
 
 
 def render_final(engine, depsgraph) -> None:
@@ -75,11 +81,32 @@ def _render(engine, depsgraph):
         for listener in STATUS_LISTENERS:
             listener(message)
 
-    from gpu_core.renderer import Renderer
-
-    result = Renderer(device).render(gscene, settings, progress=progress, should_stop=engine.test_break)
+    renderer = _renderer(scene, device, persistent=scene.render.use_persistent_data and not engine.is_preview)
+    result = renderer.render(gscene, settings, progress=progress, should_stop=engine.test_break)
     result.stats["ms"] = {"export": export_ms, "device": device_ms, **result.stats["ms"]}
     return result
+
+
+def _renderer(scene, device, persistent: bool):
+    """The renderer of ``scene``: the one held from its last render when
+    ``persistent`` (on the same device), else a fresh one, and then nothing
+    stays held (Persistent Data off gives its device memory back)."""
+    from gpu_core.renderer import Renderer
+
+    with _HELD_LOCK:
+        if not persistent:
+            _HELD.clear()
+            return Renderer(device)
+        held = _HELD.get(scene.name)
+        if held is None or held.device is not device:
+            held = _HELD[scene.name] = Renderer(device)
+        return held
+
+
+def release_held() -> None:
+    """Drop every held renderer (the add-on is disabled)."""
+    with _HELD_LOCK:
+        _HELD.clear()
 
 
 def open_device(scene):

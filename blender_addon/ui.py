@@ -102,6 +102,8 @@ class GPUGI_PT_device(GpuGiRenderPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(context.scene.gpugi, "device")
+        # Blender's own setting: final renders keep the scene, kd-tree and photons between frames
+        layout.prop(context.scene.render, "use_persistent_data", text="Persistent Data")
 
 
 class GPUGI_PT_passes(bpy.types.Panel):

@@ -53,6 +53,18 @@ def test_light_passes_add_up_to_combined(device, clamp):
     assert all(np.isfinite(passes[name]).all() for name in LIGHT_PASSES)
 
 
+@pytest.mark.parametrize("clamp", [0.0, 0.5])
+def test_combined_is_the_same_with_and_without_the_light_passes(device, clamp):
+    # without the passes the kernel sums a path's light once instead of per
+    # pass (IMAGE_LIGHT_PASSES): the same paths, so the same image but for
+    # the order of float additions
+    settings = dict(samples=16, diffuse_bounces=2, clamp=clamp)
+    with_passes = render(device, mixed_scene(), **settings)["Combined"]
+    without = Renderer(device).render(mixed_scene(), RenderSettings(**settings)).passes["Combined"]
+    assert without.mean() > 0.05
+    np.testing.assert_allclose(without, with_passes, rtol=1e-5, atol=1e-6)
+
+
 def test_direct_light_on_a_diffuse_plane_is_all_diffuse_direct(device):
     lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 2.0), power=(100.0,) * 3)])
     passes = render(device, plane_scene(lights, camera_looking_down(size=16)), samples=4)

@@ -1,0 +1,61 @@
+"""Blender's Persistent Data: F12 renders of a scene (an animation's frames)
+keep one renderer, so a frame reuses what did not change since the last one."""
+
+import os
+
+import numpy as np
+import pytest
+from conftest import ROOT, render_to_array
+
+from blender_addon import final
+from blender_addon.final import LAST_RUN
+
+
+def _box_torus(bpy, persistent: bool):
+    final.release_held()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_scenes", "box_torus.blend"))
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    scene.render.resolution_percentage = 100
+    scene.gpugi.mode, scene.gpugi.preset = "GI", "DRAFT"
+    scene.gpugi.denoise = False
+    scene.render.use_persistent_data = persistent
+    return scene
+
+
+def _frame(bpy, scene, path) -> tuple[np.ndarray, list[str]]:
+    image = render_to_array(bpy, scene, "GPUGI", str(path))
+    assert not LAST_RUN.get("error")
+    return image, LAST_RUN["stats"]["plan"]
+
+
+@pytest.mark.parametrize("persistent", [True, False])
+def test_a_camera_move_reuses_the_kdtree_and_photons_only_with_persistent_data(bpy_module, tmp_path, persistent):
+    scene = _box_torus(bpy_module, persistent)
+    first, plan = _frame(bpy_module, scene, tmp_path / "1.exr")
+    assert {"kdtree", "global_photons"} <= set(plan)
+    scene.camera.location.x += 0.2
+    second, plan = _frame(bpy_module, scene, tmp_path / "2.exr")
+    reused = {"kdtree_reused", "global_photons_reused"}
+    assert reused <= set(plan) if persistent else not reused & set(plan)
+    assert not np.allclose(first, second)  # the new view, not the old image
+
+
+def test_a_light_edit_traces_the_photons_again_and_keeps_the_kdtree(bpy_module, tmp_path):
+    scene = _box_torus(bpy_module, True)
+    first, _ = _frame(bpy_module, scene, tmp_path / "1.exr")
+    light = next(obj for obj in scene.objects if obj.type == "LIGHT")
+    light.data.energy *= 2.0
+    second, plan = _frame(bpy_module, scene, tmp_path / "2.exr")
+    assert "kdtree_reused" in plan and "global_photons" in plan
+    # one light, all light scales with it (the same random streams)
+    np.testing.assert_allclose(second[..., :3].mean(), 2.0 * first[..., :3].mean(), rtol=1e-3)
+
+
+def test_turning_persistent_data_off_gives_the_held_renderer_back(bpy_module, tmp_path):
+    scene = _box_torus(bpy_module, True)
+    _frame(bpy_module, scene, tmp_path / "1.exr")
+    assert final._HELD
+    scene.render.use_persistent_data = False
+    _frame(bpy_module, scene, tmp_path / "2.exr")
+    assert not final._HELD
