@@ -7,8 +7,9 @@ samples with and without its denoiser (set up like the reference: box
 filter, no clamp, no glossy filter, deep bounces), GPU GI's presets as
 rendered and denoised (Open Image Denoise from the albedo and normal
 passes, as Cycles' denoiser), and a sweep of its main knobs from the
-Preview preset. Each configuration's render time (median of --repeats, the
-bpy render call including export) and its errors against the reference
+Preview preset, all with the reference's 1-pixel box filter. Each
+configuration's render time (median of --repeats, the bpy render call
+including export) and its errors against the reference
 go into a table and a log-log plot, bench/figures/tradeoff[_SIZE].png:
 
 * display relative RMSE: of display values (a Reinhard curve, then sRGB;
@@ -114,6 +115,7 @@ def timed(bpy, name, size, engine, configure, repeats) -> tuple[np.ndarray, floa
 
 def ours(preset: str, denoise: bool = False, **knobs):
     def configure(scene):
+        scene.cycles.pixel_filter_type, scene.cycles.filter_width = "BOX", 1.0  # the reference's film
         scene.gpugi.mode = "GI"
         scene.gpugi.preset = preset
         scene.gpugi.denoise = denoise

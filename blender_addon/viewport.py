@@ -17,7 +17,7 @@ import numpy as np
 
 from gpu_core.errors import GpuGiError, RenderCancelled
 
-from .export.camera import view_camera
+from .export.camera import pixel_filter, view_camera
 from .status import mode_line
 
 COARSE_FACTOR = 4
@@ -36,8 +36,10 @@ def view_state(context) -> ViewState:
     region, rv3d = context.region, context.region_data
     view = np.array(rv3d.view_matrix, np.float64)
     window = np.array(rv3d.window_matrix, np.float64)
-    camera = view_camera(view, window, region.width, region.height, ortho=not rv3d.is_perspective)
-    signature = (region.width, region.height, view.round(9).tobytes(), window.round(9).tobytes())
+    film_filter = pixel_filter(context.scene)
+    camera = view_camera(view, window, region.width, region.height, ortho=not rv3d.is_perspective,
+                         film_filter=film_filter)
+    signature = (region.width, region.height, view.round(9).tobytes(), window.round(9).tobytes(), film_filter)
     return ViewState(camera=camera, signature=signature)
 
 

@@ -324,6 +324,14 @@ inline void Image_accumulate(const ImagePath *path, float clamp_value, float3 *p
     for (int p = 0; p < IMAGE_SLOTS; ++p) pixel_light[p] += path->light[p] * scale;
 }
 
+/* The pixel filter's offset from the pixel centre along one axis, for u in
+ * [0, 1): its inverse CDF, tabulated on the host (shading/pixel_filter.py). */
+inline float Image_filter_offset(const __global float *table, float u) {
+    float x = clamp(u, 0.0f, 1.0f) * (float)(FILTER_TABLE_SIZE - 1);
+    int i = min((int)x, FILTER_TABLE_SIZE - 2);
+    return mix(table[i], table[i + 1], x - (float)i);
+}
+
 /* Pixel order: launches take the window's pixels in strips of IMAGE_STRIP
  * rows, column by column within a strip, so that a work-group's work-items
  * cover a block of the image rather than a line (IMAGE_STRIP 1: rows). The
@@ -342,7 +350,8 @@ inline int2 Image_pixel_of(int g, int w, int h) {
  * in this launch, first pixel of the launch; job.origin: the window's
  * lower-left pixel), all its samples. Light passes are stored pass after
  * pass, each the size of the window. */
-__kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, IMAGE_GI_PARAMS, __global float4 *out_combined,
+__kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global float *pixel_filter, IMAGE_GI_PARAMS,
+                           __global float4 *out_combined,
                            __global float *out_depth, __global float4 *out_normal, __global float4 *out_light,
                            __global float4 *out_albedo, __global float4 *out_feature_normal) {
     int i = get_global_id(0);
@@ -363,7 +372,8 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, IMAGE_GI_PARAMS, __
     float depth = 1e10f;
     float3 normal = (float3)(0.0f);
     /* anti-aliasing: the pixel's samples follow the R2 sequence from a
-     * random offset, so they cover its area evenly */
+     * random offset, so they cover the unit square evenly, and the pixel
+     * filter's inverse CDF takes them around the pixel's centre */
     uint pixel_id = (uint)(py * cam.width + px);
     uint aa_x = Rng_hash(pixel_id ^ Rng_hash(job.seed ^ 0xa511e9b3U));
     uint aa_y = Rng_hash(aa_x);
@@ -371,8 +381,9 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, IMAGE_GI_PARAMS, __
         Rng rng = Rng_make(pixel_id, (uint)s, job.seed);
         float2 aa = Rng_r2((uint)s, aa_x, aa_y);
         ImagePath path;
-        Image_path(&sc, &cam, &job, gi_pos, gi_nrm, gi_indirect, gi_caustic, wx, wy, px + aa.x, py + aa.y, &rng,
-                   &path);
+        float sx = (float)px + 0.5f + Image_filter_offset(pixel_filter, aa.x);
+        float sy = (float)py + 0.5f + Image_filter_offset(pixel_filter, aa.y);
+        Image_path(&sc, &cam, &job, gi_pos, gi_nrm, gi_indirect, gi_caustic, wx, wy, sx, sy, &rng, &path);
         Image_accumulate(&path, job.clamp, pixel_light);
         alpha_sum += path.alpha;
         albedo_sum += path.albedo;

@@ -20,6 +20,7 @@ from .errors import RenderCancelled
 from .scene.model import Scene
 from .scene.upload import SceneBuffers
 from .settings import RenderSettings
+from .shading.pixel_filter import filter_table
 
 PROGRAM = "image.cl"
 _BATCH_SECONDS = 0.1  # aimed duration of one launch (cancel latency)
@@ -87,6 +88,7 @@ def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: 
     job["outputs"], job["gi_subpixels"] = outputs, gi_field.subpixels if gi_field is not None else 1
     kernel = device.kernel(PROGRAM, "Image_pixels", defines)
     scene_args = buffers.kernel_args(settings.transparent_background)
+    pixel_filter = device.to_device(filter_table(scene.camera.filter_kind, scene.camera.filter_width))
     # the first launch is sized by its path count; later ones by the measured speed
     paths_per_pixel = settings.samples * settings.light_samples
     batch = _ladder(max(_FIRST_BATCH_PATHS // paths_per_pixel, 1), settings.batch_pixels)
@@ -95,7 +97,7 @@ def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: 
         count = min(batch, total - start)
         job["window"] = (w, h, count, start)
         began = time.perf_counter()
-        kernel(count, *scene_args, job, *gi, combined, depth, normal, light, albedo, feature_normal)
+        kernel(count, *scene_args, job, pixel_filter, *gi, combined, depth, normal, light, albedo, feature_normal)
         device.queue.finish()
         elapsed = time.perf_counter() - began
         start += count

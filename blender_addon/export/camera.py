@@ -5,7 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 from gpu_core.errors import GpuGiError
-from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Camera
+from gpu_core.scene import (
+    CAMERA_ORTHO,
+    CAMERA_PERSP,
+    FILTER_BLACKMAN_HARRIS,
+    FILTER_BOX,
+    FILTER_GAUSSIAN,
+    Camera,
+)
+
+_FILTER_KINDS = {"BOX": FILTER_BOX, "GAUSSIAN": FILTER_GAUSSIAN, "BLACKMAN_HARRIS": FILTER_BLACKMAN_HARRIS}
 
 
 class CameraError(GpuGiError):
@@ -55,6 +64,16 @@ def window_from_frame(frame, ortho: bool) -> tuple[float, float, float, float]:
     )
 
 
+def pixel_filter(scene) -> tuple[int, float]:
+    """The film's pixel filter (FILTER_*, width in pixels): Cycles' Pixel
+    Filter where the Cycles add-on's settings exist, so a scene set up for
+    Cycles renders alike, else Blackman-Harris of Blender's Filter Size."""
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None and hasattr(cycles, "pixel_filter_type"):
+        return _FILTER_KINDS.get(cycles.pixel_filter_type, FILTER_BLACKMAN_HARRIS), float(cycles.filter_width)
+    return FILTER_BLACKMAN_HARRIS, float(scene.render.filter_size)
+
+
 def scene_camera(scene, camera_obj, warnings: list[str]) -> Camera:
     """The scene camera at the render resolution, with border and clipping.
 
@@ -71,6 +90,7 @@ def scene_camera(scene, camera_obj, warnings: list[str]) -> Camera:
         warnings.append("motion blur is not supported; rendered without it")
     width, height = render_size(render)
     ortho = data.type == "ORTHO"
+    film_filter = pixel_filter(scene)
     return Camera(
         matrix=np.array(camera_obj.matrix_world, np.float64),
         window=window_from_frame(data.view_frame(scene=scene), ortho),
@@ -80,6 +100,8 @@ def scene_camera(scene, camera_obj, warnings: list[str]) -> Camera:
         clip_start=float(data.clip_start),
         clip_end=float(data.clip_end),
         border=border_pixels(render, width, height),
+        filter_kind=film_filter[0],
+        filter_width=film_filter[1],
     )
 
 
@@ -107,8 +129,10 @@ def clip_from_projection(projection, ortho: bool) -> tuple[float, float]:
     return b / (a - 1.0), b / (a + 1.0)
 
 
-def view_camera(view_matrix, projection, width: int, height: int, ortho: bool) -> Camera:
-    """A camera for a 3D viewport from its view and projection matrices.
+def view_camera(view_matrix, projection, width: int, height: int, ortho: bool,
+                film_filter: tuple[int, float] = (FILTER_BOX, 1.0)) -> Camera:
+    """A camera for a 3D viewport from its view and projection matrices,
+    with ``film_filter`` (pixel_filter's kind and width) as its pixel filter.
 
     An orthographic view clips from behind its own origin; the camera is
     moved back so that its clipping range starts at zero.
@@ -127,4 +151,6 @@ def view_camera(view_matrix, projection, width: int, height: int, ortho: bool) -
         kind=CAMERA_ORTHO if ortho else CAMERA_PERSP,
         clip_start=max(float(near), 0.0),
         clip_end=float(far),
+        filter_kind=film_filter[0],
+        filter_width=film_filter[1],
     )

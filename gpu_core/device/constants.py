@@ -27,6 +27,12 @@ AREA_ELLIPSE = 1
 CAMERA_PERSP = 0
 CAMERA_ORTHO = 1
 
+# pixel filters (shading/pixel_filter.py), as Cycles' film has them
+FILTER_BOX = 0
+FILTER_GAUSSIAN = 1
+FILTER_BLACKMAN_HARRIS = 2
+FILTER_TABLE_SIZE = 256  # entries of the filter's inverse CDF the image kernel reads
+
 # light passes of the image kernel, in the order of image.LIGHT_PASSES
 PASS_DIFFUSE = 0  # +0 direct, +1 indirect
 PASS_GLOSSY = 2

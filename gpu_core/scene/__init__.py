@@ -6,6 +6,9 @@ from ..device.constants import (
     AREA_RECTANGLE,
     CAMERA_ORTHO,
     CAMERA_PERSP,
+    FILTER_BLACKMAN_HARRIS,
+    FILTER_BOX,
+    FILTER_GAUSSIAN,
     LIGHT_AREA,
     LIGHT_POINT,
     LIGHT_SPOT,
@@ -15,6 +18,7 @@ from .model import PARTS, Camera, Lights, Materials, Scene, ValidationReport, pa
 from .validate import validate
 
 __all__ = [
-    "AREA_ELLIPSE", "AREA_RECTANGLE", "CAMERA_ORTHO", "CAMERA_PERSP", "LIGHT_AREA", "LIGHT_POINT", "LIGHT_SPOT",
+    "AREA_ELLIPSE", "AREA_RECTANGLE", "CAMERA_ORTHO", "CAMERA_PERSP", "FILTER_BLACKMAN_HARRIS", "FILTER_BOX",
+    "FILTER_GAUSSIAN", "LIGHT_AREA", "LIGHT_POINT", "LIGHT_SPOT",
     "LIGHT_SUN", "PARTS", "Camera", "Lights", "Materials", "Scene", "ValidationReport", "part_digests", "validate",
 ]

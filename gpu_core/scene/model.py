@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..device.constants import AREA_RECTANGLE, CAMERA_PERSP, LIGHT_POINT, LIGHT_SUN
+from ..device.constants import AREA_RECTANGLE, CAMERA_PERSP, FILTER_BOX, LIGHT_POINT, LIGHT_SUN
 
 
 @dataclass
@@ -146,7 +146,8 @@ class Camera:
     plane z = -1 for a perspective camera (sensor fit and lens shift already
     applied), in scene units for an orthographic one. ``border`` (x0, y0, x1,
     y1) is the pixel window to render, x1/y1 exclusive; rows count from the
-    bottom, as in Blender's render result.
+    bottom, as in Blender's render result. ``filter_kind`` (FILTER_*) and
+    ``filter_width`` (pixels) are the pixel filter, as Cycles' film sets them.
     """
 
     matrix: np.ndarray  # (4, 4) float64, camera to world (camera looks down -Z)
@@ -157,6 +158,8 @@ class Camera:
     clip_start: float = 0.1
     clip_end: float = 1000.0
     border: tuple[int, int, int, int] | None = None
+    filter_kind: int = FILTER_BOX
+    filter_width: float = 1.0
 
     @property
     def pixel_window(self) -> tuple[int, int, int, int]:
@@ -253,7 +256,8 @@ def part_digests(scene: Scene) -> dict[str, bytes]:
         "world": [scene.world_color],
         "camera": [np.asarray(scene.camera.matrix), np.asarray(scene.camera.window),
                    np.array([scene.camera.width, scene.camera.height, scene.camera.kind, scene.camera.clip_start,
-                             scene.camera.clip_end, *(scene.camera.border or (-1, -1, -1, -1))], np.float64)],
+                             scene.camera.clip_end, *(scene.camera.border or (-1, -1, -1, -1)),
+                             scene.camera.filter_kind, scene.camera.filter_width], np.float64)],
     }
     return {part: _digest(values) for part, values in arrays.items()}
 

@@ -98,6 +98,7 @@ def test_depth_and_normal_passes_match_cycles(bpy_empty, tmp_path):
     scene = _sphere_on_plane(bpy)
     scene.gpugi.samples = 1
     scene.cycles.samples, scene.cycles.use_denoising = 1, False
+    scene.cycles.pixel_filter_type, scene.cycles.filter_width = "BOX", 1.0  # samples stay in their pixels
     depth, normal = _render_passes(bpy, scene, "GPUGI", tmp_path / "gpugi.exr")
     assert LAST_RUN["passes"] == ["Combined", "Depth", "Normal"]
     ref_depth, ref_normal = _render_passes(bpy, scene, "CYCLES", tmp_path / "cycles.exr")

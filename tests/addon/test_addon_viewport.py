@@ -14,6 +14,7 @@ import pytest
 from blender_addon.display import DISPLAY_MAX, prepare_pixels
 from blender_addon.engine import GpuGiRenderEngine
 from blender_addon.viewport import COARSE_FACTOR, Job, ViewportSession, view_state
+from gpu_core.scene import FILTER_BLACKMAN_HARRIS, FILTER_BOX
 from gpu_core.errors import DeviceError, RenderCancelled
 from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Lights
 from gpu_core.settings import RenderSettings
@@ -90,6 +91,7 @@ def _context(width, height, view, window, perspective=True):
     return SimpleNamespace(
         region=SimpleNamespace(width=width, height=height),
         region_data=SimpleNamespace(view_matrix=view, window_matrix=window, is_perspective=perspective),
+        scene=SimpleNamespace(cycles=SimpleNamespace(pixel_filter_type="BLACKMAN_HARRIS", filter_width=1.5)),
     )
 
 
@@ -137,6 +139,16 @@ def test_view_signature_changes_with_region_size_and_matrices():
     moved = view.copy()
     moved[0, 3] = 0.5
     assert view_state(_context(10, 10, moved, window)).signature != base
+
+
+def test_the_view_camera_takes_the_film_filter_and_a_filter_edit_changes_the_signature():
+    view, window = np.eye(4), _perspective(1.0, 1.0, 0.1, 10.0)
+    context = _context(10, 10, view, window)
+    state = view_state(context)
+    assert (state.camera.filter_kind, state.camera.filter_width) == (FILTER_BLACKMAN_HARRIS, 1.5)
+    context.scene.cycles.pixel_filter_type = "BOX"
+    boxed = view_state(context)
+    assert boxed.camera.filter_kind == FILTER_BOX and boxed.signature != state.signature
 
 
 # -- worker scheduling --------------------------------------------------------------

@@ -46,6 +46,7 @@ def test_final_preset_matches_the_cycles_reference(bpy_module, tmp_path, name, d
     scene.gpugi.preset = "FINAL"
     scene.gpugi.mode = "GI"
     scene.gpugi.denoise = denoise
+    scene.cycles.pixel_filter_type, scene.cycles.filter_width = "BOX", 1.0  # the reference's film
     ours = render_to_array(bpy, scene, "GPUGI", str(tmp_path / "gi.exr"))[..., :3].astype(np.float64)
     assert np.isfinite(ours).all()
     np.testing.assert_allclose(ours.mean(axis=(0, 1)), reference.mean(axis=(0, 1)), rtol=MEAN_TOLERANCE)
