@@ -109,8 +109,10 @@ def light_table(scene: Scene, center: np.ndarray, radius: float, emit_tris: np.n
         table["kind"][n] = LIGHT_MESH
     if n:
         _light_rows(scene, center, table)
-    weight = emitted_power(scene, table, radius, emit_tris).sum(axis=1)
-    if len(table) and weight.sum() > 0:
+    # weights relative to the strongest light, so the sum stays finite
+    weight = np.nan_to_num(emitted_power(scene, table, radius, emit_tris).sum(axis=1), nan=0.0, posinf=1e300)
+    if len(table) and weight.max() > 0:
+        weight = weight / weight.max()
         table["pick"] = np.cumsum(weight) / weight.sum()
         table["pick"][-1] = 1.0
     return table

@@ -45,3 +45,12 @@ def test_lights_without_power_have_no_chance_of_being_picked():
 def test_no_light_with_power_leaves_the_pick_at_zero():
     tables = _tables([dict(kind=LIGHT_POINT, position=(0, 0, 2), power=(0.0,) * 3)])
     assert np.all(tables.lights["pick"] == 0.0)
+
+
+def test_a_light_of_enormous_power_among_others_keeps_the_pick_finite():
+    tables = _tables([dict(kind=LIGHT_POINT, position=(0, 0, 2), power=(1e38,) * 3),
+                      dict(kind=LIGHT_POINT, position=(1, 0, 2), power=(1e38,) * 3),
+                      dict(kind=LIGHT_POINT, position=(2, 0, 2), power=(1.0,) * 3)])
+    pick = tables.lights["pick"]
+    assert np.all(np.isfinite(pick)) and pick[-1] == 1.0
+    np.testing.assert_allclose(pick[:2], [0.5, 1.0], atol=1e-6)
