@@ -9,14 +9,13 @@ In GI mode the kernel reads the GI cache through the shading-point grid
 from __future__ import annotations
 
 import time
-from typing import Callable
 
 import numpy as np
 
 from .device import Device
 from .device.constants import OUTPUT_DENOISING, PASS_COUNT
 from .device.layout import IMAGE_JOB_DTYPE
-from .errors import RenderCancelled
+from .errors import check_stop
 from .scene.model import Scene
 from .scene.upload import SceneBuffers
 from .settings import RenderSettings
@@ -41,12 +40,6 @@ assert len(LIGHT_PASSES) == PASS_COUNT
 def programs(defines: dict) -> list[tuple[str, dict]]:
     """The program the image stage builds with the plan's defines."""
     return [(PROGRAM, defines)]
-
-
-def check_stop(should_stop: Callable[[], bool] | None) -> None:
-    """RenderCancelled when the caller asked to stop."""
-    if should_stop is not None and should_stop():
-        raise RenderCancelled("render cancelled")
 
 
 def film_bytes(window: tuple[int, int, int, int], settings: RenderSettings) -> int:

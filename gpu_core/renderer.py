@@ -20,9 +20,9 @@ from typing import Callable
 from .denoise import denoise
 from .device import Device
 from .device.timer import StageTimer
-from .errors import GpuGiError
+from .errors import GpuGiError, check_stop
 from .gi.pipeline import render_gi
-from .image import DENOISING_PASSES, LIGHT_PASSES, check_stop, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
+from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
 from .scene.model import Scene
@@ -77,7 +77,7 @@ class Renderer:
                 maps = self._photon_maps(the_plan, settings)
             check_stop(should_stop)
             field_ = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
-                               the_plan.stages, the_plan.scene_defines, timer)
+                               the_plan.stages, the_plan.scene_defines, timer, should_stop)
             field_.stats["photons_reused"] = not the_plan.traces_photons
             check_stop(should_stop)
         with timer.stage("render"):

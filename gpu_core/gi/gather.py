@@ -14,17 +14,19 @@ weight. Nothing but a hit count comes back to the host.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import pyopencl as cl
 
 from ..device import Device, primitives
+from ..errors import check_stop
 from ..scene.upload import SceneBuffers
 from .cut import Cut, lookup_defines
 
 _PROGRAM = "gi/gather.cl"
 GROUP = 64  # work-items gathering one sample point
-_RAYS_PER_LAUNCH = 1 << 20  # gather rays per launch (bounds a launch's time)
+_RAYS_PER_LAUNCH = 1 << 18  # gather rays per launch: bounds a launch's time, and so the wait for Esc
 
 
 def _defines(device: Device, scene_defines: dict | None) -> dict:
@@ -61,9 +63,11 @@ class GatherResult:
 
 
 def gather(device: Device, buffers: SceneBuffers, positions: cl.Buffer, normals: cl.Buffer, m: int, strata: int,
-           cut: Cut, seed: int = 0, max_specular: int = 8, scene_defines: dict | None = None) -> GatherResult:
+           cut: Cut, seed: int = 0, max_specular: int = 8, scene_defines: dict | None = None,
+           should_stop: Callable[[], bool] | None = None) -> GatherResult:
     """Irradiance at ``m`` sample points (float4 ``positions`` and unit
-    ``normals`` on the device, in the scene's device frame) from ``cut``."""
+    ``normals`` on the device, in the scene's device frame) from ``cut``;
+    ``should_stop`` is polled after each batch of samples (RenderCancelled)."""
     strata = max(1, int(strata))
     rays = strata * strata
     e, distance, hits = device.empty(16 * m), device.empty(4 * m), device.empty(4 * m)
@@ -76,6 +80,9 @@ def gather(device: Device, buffers: SceneBuffers, positions: cl.Buffer, normals:
         kernel.groups(count, group, *buffers.kernel_args(), *cut.kernel_args(), positions, normals, np.int32(first),
                       np.int32(m),
                       np.int32(strata), np.int32(max_specular), np.uint32(seed & 0xFFFFFFFF), e, distance, hits)
+        if should_stop is not None and first + count < m:
+            device.queue.finish()
+            check_stop(should_stop)
     total_hits = primitives.sum_ints(device, hits, m)
     stats = {"samples": m, "rays_per_sample": rays, "hit_fraction": total_hits / max(m * rays, 1)}
     return GatherResult(device, e, distance, hits, m, stats)

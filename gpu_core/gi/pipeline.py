@@ -16,6 +16,7 @@ shading-point grid (``GiField``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import pyopencl as cl
@@ -23,6 +24,7 @@ import pyopencl as cl
 from ..device import Device
 from ..accel.point_tree import query_programs
 from ..device.timer import StageTimer
+from ..errors import check_stop
 from ..photons.trace import PhotonMaps
 from ..scene.upload import SceneBuffers
 from ..settings import RenderSettings
@@ -52,26 +54,32 @@ def strata(rays: int) -> int:
 
 
 def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, int], settings: RenderSettings,
-              maps: PhotonMaps, stages: list[str], scene_defines: dict, timer: StageTimer) -> GiField:
+              maps: PhotonMaps, stages: list[str], scene_defines: dict, timer: StageTimer,
+              should_stop: Callable[[], bool] | None = None) -> GiField:
     """The GI field of the pixels in ``window`` for a scene on the device;
-    ``stages`` (the plan) says which cache stages run."""
+    ``stages`` (the plan) says which cache stages run. ``should_stop`` is
+    polled between the stages and between gather batches (RenderCancelled)."""
     stats: dict = {"photons": maps.stats}
     with timer.stage("shading_points"):
         points = shading_points.trace(device, buffers, window, settings.max_bounces, settings.gi_subpixels,
                                         scene_defines)
     n = stats["shading_points"] = points.count
+    check_stop(should_stop)
     indirect = caustic = None
     if "final_gather" in stages and n:
         with timer.stage("sample_points"):
             chosen = samples.select(device, points.pos, points.nrm, points.pixel, n, points.width, points.height,
                                     min(settings.cache_seeds, n), alpha=settings.cache_alpha, seed=settings.seed)
+        check_stop(should_stop)
         with timer.stage("cut"):
             the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
             gather_cut = cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k)
+        check_stop(should_stop)
         with timer.stage("gather"):
             gathered = gather.gather(device, buffers, chosen.pos, chosen.nrm, chosen.count,
                                      strata(settings.gather_rays), gather_cut, settings.seed, settings.max_bounces,
-                                     scene_defines)
+                                     scene_defines, should_stop)
+        check_stop(should_stop)
         with timer.stage("interpolate"):
             clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
             irradiance, interp = interpolation.interpolate_on_device(
@@ -79,6 +87,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
             indirect = points.scatter(irradiance)
         stats.update(sample_points=chosen.count, cut=the_cut.stats, gather=gathered.stats,
                      outliers_clamped=outliers_clamped, interpolation={k: v for k, v in interp.items() if k != "ms"})
+        check_stop(should_stop)
     if "caustics" in stages and n:
         with timer.stage("caustics"):
             estimate = device.empty(16 * n)

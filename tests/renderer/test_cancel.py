@@ -1,0 +1,44 @@
+"""Stopping a render: ``should_stop`` is polled between every GI stage and
+gather batch as well as between image batches; stopping at any poll raises
+RenderCancelled, and the next render of the same renderer is unchanged."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from test_threads import GI, scene
+
+from gpu_core.errors import RenderCancelled
+from gpu_core.gi import gather
+from gpu_core.renderer import Renderer
+
+
+def _polls(renderer, the_scene, settings) -> int:
+    polls = []
+    renderer.render(the_scene, settings, should_stop=lambda: polls.append(1) is None and False)
+    return len(polls)
+
+
+def test_every_gi_stage_and_gather_batch_is_followed_by_a_poll(device, monkeypatch):
+    the_scene = scene(True, 20)  # a mirror: the caustic map and its stage too
+    renderer = Renderer(device)
+    renderer.render(the_scene, GI)  # programs ready: no poll while waiting for builds
+    one_batch = _polls(renderer, the_scene, GI)
+    # polls after compile, upload, photons, shading points, sample points, cut,
+    # gather, interpolation, and the GI field before the image
+    assert one_batch >= 9
+    monkeypatch.setattr(gather, "_RAYS_PER_LAUNCH", 16 * 20)  # 20 cache points per batch: 4 batches
+    assert _polls(renderer, the_scene, GI) == one_batch + 3
+
+
+def test_stopping_at_any_poll_cancels_and_the_next_render_is_unchanged(device):
+    the_scene = scene(True, 20)
+    renderer = Renderer(device)
+    expected = renderer.render(the_scene, GI).passes["Combined"]
+    for stop_at in range(_polls(renderer, the_scene, GI)):
+        calls = itertools.count()
+        with pytest.raises(RenderCancelled):
+            renderer.render(the_scene, GI, should_stop=lambda: next(calls) >= stop_at)
+        np.testing.assert_array_equal(renderer.render(the_scene, GI).passes["Combined"], expected)
