@@ -67,7 +67,7 @@ class Renderer:
         with timer.stage("compile"):
             _Builds(self.device, the_plan.programs).join(progress, should_stop)
         check_stop(should_stop)
-        self._upload(scene, the_plan, timer)
+        self._upload(scene, the_plan, timer, should_stop)
         check_stop(should_stop)
         field_ = None
         if settings.mode == "gi":
@@ -97,10 +97,11 @@ class Renderer:
 
     # -- stages ------------------------------------------------------------------
 
-    def _upload(self, scene: Scene, the_plan: Plan, timer: StageTimer) -> None:
+    def _upload(self, scene: Scene, the_plan: Plan, timer: StageTimer, should_stop) -> None:
         """Upload the parts the plan names; the renderer holds them from now on."""
         self._held.tables = None  # until the upload completes, nothing is held
-        self._buffers = upload(self.device, scene, the_plan.tables, self._buffers, the_plan.changed, timer)
+        self._buffers = upload(self.device, scene, the_plan.tables, self._buffers, the_plan.changed, timer,
+                               should_stop)
         self._held.digests, self._held.generations = the_plan.digests, the_plan.generations
         self._held.tables = the_plan.tables
 

@@ -10,6 +10,7 @@ for tests and benchmarks (kdtree_query.cl).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import pyopencl.array as cla
@@ -120,8 +121,9 @@ class KdTree:
         return n, dev.to_device(org4), dev.to_device(dir4), dev.to_device(rng)
 
 
-def build(device: Device, triangles: np.ndarray) -> KdTree:
-    """A kd-tree over ``triangles`` (``(N, 3, 3)`` float32), built on ``device``."""
+def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool] | None = None) -> KdTree:
+    """A kd-tree over ``triangles`` (``(N, 3, 3)`` float32), built on
+    ``device``; ``should_stop`` is polled after every level of the build."""
     tris = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
     if not np.isfinite(tris).all():
         bad = int((~np.isfinite(tris).all(axis=(1, 2))).sum())
@@ -132,7 +134,7 @@ def build(device: Device, triangles: np.ndarray) -> KdTree:
         verts = float4_rows(tris.reshape(-1, 3)) if count else np.zeros((3, 4), np.float32)
         verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
     with timer.stage("build"):
-        out = build_tree(device, verts_dev, count)
+        out = build_tree(device, verts_dev, count, should_stop=should_stop)
     stats = dict(out.stats)
     stats["ms"] = {"upload": timer.ms["upload"], **out.stats["ms"]}
     stats["ms"]["total"] = timer.ms["upload"] + timer.ms["build"]

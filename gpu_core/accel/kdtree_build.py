@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import pyopencl as cl
@@ -33,6 +34,7 @@ from ..device.constants import KD_LEAF as LEAF
 from ..device.constants import KD_MAX_DEPTH as MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE
 from ..device.timer import StageTimer
+from ..errors import check_stop
 
 CHUNK = 256  # elements per chunk of the large-node stage
 SMALL = 64  # largest small node (the width of its element mask)
@@ -112,8 +114,10 @@ class _Build:
     """The state of one build: records (nodes in creation order), leaf lists,
     small roots and their elements, as growing device arrays."""
 
-    def __init__(self, device: Device, verts: cla.Array, count: int, sah_lanes: int | None):
+    def __init__(self, device: Device, verts: cla.Array, count: int, sah_lanes: int | None,
+                 should_stop: Callable[[], bool] | None = None):
         self.device = device
+        self.should_stop = should_stop
         self.config = _Config(device, sah_lanes)
         self.verts = verts
         self.count = count
@@ -170,6 +174,7 @@ class _Build:
         while self.active:
             self.large_levels += 1
             self._large_level()
+            check_stop(self.should_stop)
 
     def _large_level(self) -> None:
         dev, i32 = self.device, np.int32
@@ -260,6 +265,7 @@ class _Build:
         while self.small_active:
             self.small_levels += 1
             self._small_level()
+            check_stop(self.should_stop)
 
     def _small_level(self) -> None:
         dev, i32, config = self.device, np.int32, self.config
@@ -321,14 +327,16 @@ class _Build:
         }
 
 
-def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None) -> BuildOutput:
+def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None,
+               should_stop: Callable[[], bool] | None = None) -> BuildOutput:
     """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
 
     ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
     per node of the SAH search; by default 1 on a CPU, else ``SAH_GROUP``.
-    The tree is the same whatever it is.
+    The tree is the same whatever it is. ``should_stop`` is polled after
+    every level (RenderCancelled).
     """
-    build = _Build(device, verts, count, sah_lanes)
+    build = _Build(device, verts, count, sah_lanes, should_stop)
     timer = build.timer
     with timer.stage("setup"):
         build.setup()

@@ -10,6 +10,7 @@ uploads the 64-byte rows of the materials, not the triangles).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import pyopencl as cl
@@ -54,18 +55,19 @@ class SceneBuffers:
 
 
 def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuffers | None = None,
-           changed=PARTS, timer: StageTimer | None = None) -> SceneBuffers:
+           changed=PARTS, timer: StageTimer | None = None, should_stop: Callable[[], bool] | None = None) -> SceneBuffers:
     """The device copy of a validated ``scene`` whose ``tables`` are built;
     the buffers of ``previous`` stay where no part they hold is in
     ``changed`` (the plan says which). The kd-tree build is timed as
-    "kdtree", the rest as "upload"."""
+    "kdtree", the rest as "upload"; ``should_stop`` is polled during the
+    kd-tree build (RenderCancelled)."""
     timer = timer or StageTimer()
     moved = previous is None or not np.array_equal(tables.center, previous.center)
     changed = set(PARTS) if moved else set(changed)
     old = previous if not moved else None
     if old is None or "geometry" in changed:
         with timer.stage("kdtree"):
-            tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32))
+            tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32), should_stop)
         with timer.stage("upload"):
             geometry = (tree, device.to_device(float4_rows(scene.normals.reshape(-1, 3))),
                         device.to_device(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),
