@@ -17,15 +17,12 @@ Writes bench/results/cancel[_quick].txt and .json.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import statistics
 import time
 
-from bpy_render import ROOT, load_bpy, open_scene
+from bpy_render import load_bpy, open_scene
 from machine import describe
-
-RESULTS = os.path.join(ROOT, "bench", "results")
+from report import write_results
 
 
 def timeline(ms: dict) -> list[tuple[str, float, float]]:
@@ -100,12 +97,7 @@ def main() -> None:
     if worst:
         lines.append(f"worst: {worst['worst_ms']:.0f} ms in {worst['stage']} (target 250 ms)")
     print("\n".join(lines))
-    os.makedirs(RESULTS, exist_ok=True)
-    suffix = "_quick" if args.quick else ""
-    with open(os.path.join(RESULTS, f"cancel{suffix}.json"), "w") as f:
-        json.dump(dict(machine=lines[0], rows=rows), f, indent=1)
-    with open(os.path.join(RESULTS, f"cancel{suffix}.txt"), "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_results("cancel_quick" if args.quick else "cancel", dict(machine=lines[0], rows=rows), lines)
 
 
 if __name__ == "__main__":

@@ -43,8 +43,8 @@ import time
 
 from bpy_render import ROOT, load_bpy, open_scene, render
 from machine import describe
+from report import write_results
 
-RESULTS = os.path.join(ROOT, "bench", "results")
 FIGURE = os.path.join(ROOT, "bench", "figures", "frame.png")
 SCENES = sorted(name[:-6] for name in os.listdir(os.path.join(ROOT, "blend_scenes")) if name.endswith(".blend"))
 PRESETS = ("draft", "preview", "final", "reference")
@@ -223,12 +223,8 @@ def main() -> None:
                         f"{stage_line(result['ms'])}")
                 print(line, flush=True)
                 lines.append(line)
-    os.makedirs(RESULTS, exist_ok=True)
     suffix = "_quick" if args.quick else f"_{args.tag}" if args.tag else ""
-    with open(os.path.join(RESULTS, f"frame{suffix}.json"), "w") as f:
-        json.dump(dict(machine=lines[0], rows=rows, first_frames=firsts, paths=rates), f, indent=1)
-    with open(os.path.join(RESULTS, f"frame{suffix}.txt"), "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_results(f"frame{suffix}", dict(machine=lines[0], rows=rows, first_frames=firsts, paths=rates), lines)
     figure = FIGURE.replace(".png", f"{suffix}.png")
     plot(rows, args.sizes[0], figure)
     print(f"plot: {figure}")

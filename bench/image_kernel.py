@@ -24,15 +24,14 @@ Writes bench/results/image_kernel[_quick].txt and .json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
 
 from bpy_render import ROOT, load_bpy, open_scene, render
 from machine import describe
+from report import write_results
 
-RESULTS = os.path.join(ROOT, "bench", "results")
 LOCAL_SIZES = (8, 16, 32, 64, 128, 256)
 STRIPS = (1, 2, 4, 8, 16)
 LIGHT_COUNTS = (1, 4, 8, 16, 64)
@@ -169,12 +168,7 @@ def main() -> None:
         line = f"lights {count} cornell_box direct: {ours:.2f}, Cycles {theirs:.2f} ({ours / theirs:.2f}x)"
         print(line, flush=True)
         lines.append(line)
-    os.makedirs(RESULTS, exist_ok=True)
-    suffix = "_quick" if args.quick else ""
-    with open(os.path.join(RESULTS, f"image_kernel{suffix}.json"), "w") as f:
-        json.dump(dict(machine=lines[0], rows=rows), f, indent=1)
-    with open(os.path.join(RESULTS, f"image_kernel{suffix}.txt"), "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_results("image_kernel_quick" if args.quick else "image_kernel", dict(machine=lines[0], rows=rows), lines)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,6 @@ target line whether GI reaches Cycles' 64-sample error faster.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 
@@ -39,6 +38,7 @@ import numpy as np
 
 from bpy_render import ROOT, load_bpy, open_scene, render
 from machine import describe
+from report import RESULTS, write_results
 
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 sys.path.insert(0, os.path.join(ROOT, "tests", "gi"))
@@ -46,7 +46,6 @@ sys.path.insert(0, os.path.join(ROOT, "tests", "references"))
 from make_references import configure as cycles_reference_settings  # noqa: E402
 from test_gi_vs_cycles import display  # noqa: E402
 
-RESULTS = os.path.join(ROOT, "bench", "results")
 FIGURE = os.path.join(ROOT, "bench", "figures", "tradeoff.png")
 CYCLES_SAMPLES = (4, 16, 64, 256, 1024)
 PRESETS = ("DRAFT", "PREVIEW", "FINAL")
@@ -232,11 +231,7 @@ def main() -> None:
         rows += scene_rows
     # the 64 px run is the README's first table; other sizes get their own files
     suffix = "_quick" if args.quick else "" if args.size == 64 else f"_{args.size}"
-    os.makedirs(RESULTS, exist_ok=True)
-    with open(os.path.join(RESULTS, f"tradeoff{suffix}.json"), "w") as f:
-        json.dump(rows, f, indent=1)
-    with open(os.path.join(RESULTS, f"tradeoff{suffix}.txt"), "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_results(f"tradeoff{suffix}", rows, lines)
     figure = FIGURE.replace(".png", f"{suffix}.png")
     plot(rows, figure)
     print(f"plot: {figure}")
