@@ -15,7 +15,7 @@ import numpy as np
 from ..device.constants import LIGHT_SPOT, PHOTON_EMITTER_WORLD
 from ..device.layout import EMITTER_DTYPE
 from ..scene.model import Scene
-from ..scene.tables import SceneTables, emitted_power
+from ..scene.tables import SceneTables
 
 
 @dataclass
@@ -33,10 +33,9 @@ def emitter_powers(scene: Scene, tables: SceneTables) -> list[Emitter]:
     """Every emitter with power, from the scene's light table; the sun and
     the world cover the scene's bounding sphere."""
     radius = tables.radius
-    emitted = emitted_power(scene, tables.lights, radius, tables.emit_tris)
     out = []
     for row, light in enumerate(tables.lights):
-        total = emitted[row]
+        total = tables.emitted[row]
         if np.sum(total) > 0:
             carried = total
             if int(light["kind"]) == LIGHT_SPOT:  # P / (4 pi) x the cone's solid angle

@@ -26,6 +26,7 @@ class SceneTables:
     radius: float  # of the scene's bounding sphere (sun and world photons)
     materials: np.ndarray  # MATERIAL_DTYPE rows
     lights: np.ndarray  # LIGHT_DTYPE rows, a LIGHT_MESH row last when there are emissive triangles
+    emitted: np.ndarray  # (L, 3) float64: the rgb watts each light row emits (emitted_power)
     emit_tris: np.ndarray  # int32 emissive triangle ids
     emit_cdf: np.ndarray  # float32 their inclusive CDF by power
     atlas: np.ndarray  # (T, 4) float32 texels of every texture
@@ -52,11 +53,11 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
     else:
         materials, atlas, infos = old.materials, old.atlas, old.texture_infos
     if old is None or changed & {"lights", "geometry", "materials"}:
-        lights = light_table(scene, center, radius, emit_tris)
+        lights, emitted = light_table(scene, center, radius, emit_tris)
     else:
-        lights = old.lights
+        lights, emitted = old.lights, old.emitted
     camera = camera_struct(scene, center) if old is None or "camera" in changed else old.camera
-    return SceneTables(center, radius, materials, lights, emit_tris, emit_cdf, atlas, infos, camera)
+    return SceneTables(center, radius, materials, lights, emitted, emit_tris, emit_cdf, atlas, infos, camera)
 
 
 def material_table(scene: Scene) -> np.ndarray:
@@ -97,11 +98,13 @@ def emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return ids, cdf
 
 
-def light_table(scene: Scene, center: np.ndarray, radius: float, emit_tris: np.ndarray) -> np.ndarray:
-    """Device light rows in Cycles' units (see shading/lights.h); the
-    emissive triangles ``emit_tris`` add one LIGHT_MESH row. Derived values
-    are computed in float64. Each row's pick is the inclusive CDF of
-    choosing it for a shadow ray, in proportion to the power it emits."""
+def light_table(scene: Scene, center: np.ndarray, radius: float,
+                emit_tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Device light rows in Cycles' units (see shading/lights.h) and the
+    rgb watts each emits; the emissive triangles ``emit_tris`` add one
+    LIGHT_MESH row. Derived values are computed in float64. Each row's pick
+    is the inclusive CDF of choosing it for a shadow ray, in proportion to
+    the power it emits."""
     lights = scene.lights
     n = len(lights)
     table = np.zeros(n + (1 if len(emit_tris) else 0), LIGHT_DTYPE)
@@ -109,13 +112,14 @@ def light_table(scene: Scene, center: np.ndarray, radius: float, emit_tris: np.n
         table["kind"][n] = LIGHT_MESH
     if n:
         _light_rows(scene, center, table)
+    emitted = emitted_power(scene, table, radius, emit_tris)
     # weights relative to the strongest light, so the sum stays finite
-    weight = np.nan_to_num(emitted_power(scene, table, radius, emit_tris).sum(axis=1), nan=0.0, posinf=1e300)
+    weight = np.nan_to_num(emitted.sum(axis=1), nan=0.0, posinf=1e300)
     if len(table) and weight.max() > 0:
         weight = weight / weight.max()
         table["pick"] = np.cumsum(weight) / weight.sum()
         table["pick"][-1] = 1.0
-    return table
+    return table, emitted
 
 
 def _light_rows(scene: Scene, center: np.ndarray, table: np.ndarray) -> None:
