@@ -66,6 +66,7 @@ def register():
     bpy.utils.register_class(GpuGiRenderEngine)
     ui.register()
     preferences.register()
+    _job_handlers(bpy, add=True)
     _registered = True
 
 
@@ -79,6 +80,7 @@ def unregister():
     from . import cache_dirs, final, preferences, properties, ui
     from .engine import GpuGiRenderEngine
 
+    _job_handlers(bpy, add=False)
     final.release_held()
     preferences.unregister()
     ui.unregister()
@@ -86,3 +88,16 @@ def unregister():
     properties.unregister()
     cache_dirs.restore()
     _registered = False
+
+
+def _job_handlers(bpy, add: bool) -> None:
+    """Blender's render-job handlers that keep a renderer across an animation's frames."""
+    from . import final
+
+    for handlers, function in ((bpy.app.handlers.render_init, final.job_started),
+                               (bpy.app.handlers.render_complete, final.job_ended),
+                               (bpy.app.handlers.render_cancel, final.job_ended)):
+        if add and function not in handlers:
+            handlers.append(bpy.app.handlers.persistent(function))  # kept when another file is opened
+        elif not add and function in handlers:
+            handlers.remove(function)

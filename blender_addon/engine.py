@@ -11,12 +11,11 @@ import bpy
 from gpu_core.errors import DeviceError, GpuGiError
 
 from .display import ViewportDrawer
-from .export import export_scene
+from .export.sync import SceneSync, read_updates
 from .final import render_final
 from .opencl_devices import survey
 from .passes import enabled_passes
-from .preferences import device_spec
-from .viewport import Job, ViewportSession, view_state
+from .viewport import ViewportSession, view_state, view_update_session
 
 
 class GpuGiRenderEngine(bpy.types.RenderEngine):
@@ -30,6 +29,7 @@ class GpuGiRenderEngine(bpy.types.RenderEngine):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._viewport: ViewportSession | None = None
+        self._sync: SceneSync | None = None
         self._drawer = ViewportDrawer()
         self._reported_error: str | None = None
 
@@ -54,22 +54,21 @@ class GpuGiRenderEngine(bpy.types.RenderEngine):
     # -- viewport ---------------------------------------------------------------
 
     def view_update(self, context, depsgraph):
-        """An edit (or the first draw): export on this (main) thread, render in the worker."""
+        """An edit (or the first draw): sync what it changed on this (main)
+        thread, render in the worker."""
         try:
             if self._viewport is None:
                 self._viewport = ViewportSession(self.tag_redraw)
-            scene = depsgraph.scene
-            view = view_state(context)
             if survey().problem:
                 raise DeviceError(survey().problem)
-            job = Job(
-                scene=export_scene(depsgraph, camera=view.camera),
-                settings=scene.gpugi.render_settings(preview=True, transparent=scene.render.film_transparent),
-                device_spec=device_spec(scene),
-                pixel_size=self.get_preview_pixel_size(scene),
-            )
-            self._viewport.update_scene(job, view.signature)
+            first = self._sync is None
+            if first:
+                self._sync = SceneSync()
+            view_update_session(self._viewport, self._sync, context, depsgraph, self.get_preview_pixel_size,
+                                None if first else read_updates(depsgraph))
         except Exception as err:  # never a traceback in the viewport
+            if not isinstance(err, GpuGiError):
+                self._sync = None  # an unexpected failure: the next edit exports everything again
             self._report_viewport_error(err)
 
     def view_draw(self, context, depsgraph):

@@ -30,6 +30,11 @@ STATUS_LISTENERS: list[Callable[[str], None]] = []
 # the scene on the device, the kd-tree, the photon maps.
 _HELD: dict[str, object] = {}
 _HELD_LOCK = threading.Lock()
+# Within one render job (an animation's frames, between Blender's render_init
+# and render_complete or render_cancel) the renderer of each scene is kept
+# whatever Persistent Data says: a fly-through traces its photons and builds
+# its kd-tree once while only the camera moves. None outside a job.
+_JOB: dict[str, object] | None = None
 
 
 def render_final(engine, depsgraph) -> None:
@@ -81,7 +86,8 @@ def _render(engine, depsgraph):
         for listener in STATUS_LISTENERS:
             listener(message)
 
-    renderer = _renderer(scene, device, persistent=scene.render.use_persistent_data and not engine.is_preview)
+    renderer = (_renderer(scene, device, persistent=scene.render.use_persistent_data) if not engine.is_preview
+                else _fresh_renderer(device))
     result = renderer.render(gscene, settings, progress=progress, should_stop=engine.test_break)
     result.stats["ms"] = {"export": export_ms, "device": device_ms, **result.stats["ms"]}
     return result
@@ -89,22 +95,48 @@ def _render(engine, depsgraph):
 
 def _renderer(scene, device, persistent: bool):
     """The renderer of ``scene``: the one held from its last render when
-    ``persistent`` (on the same device), else a fresh one, and then nothing
-    stays held (Persistent Data off gives its device memory back)."""
+    ``persistent`` (on the same device); else the one of this render job
+    (an animation's earlier frames), or a fresh one outside a job; without
+    ``persistent`` nothing stays held after the job (Persistent Data off
+    gives its device memory back)."""
     from gpu_core.renderer import Renderer
 
     with _HELD_LOCK:
         if not persistent:
             _HELD.clear()
+        kept = _HELD if persistent else _JOB
+        if kept is None:
             return Renderer(device)
-        held = _HELD.get(scene.name)
+        held = kept.get(scene.name)
         if held is None or held.device is not device:
-            held = _HELD[scene.name] = Renderer(device)
+            held = kept[scene.name] = Renderer(device)
         return held
+
+
+def _fresh_renderer(device):
+    """A renderer for one material preview (never kept)."""
+    from gpu_core.renderer import Renderer
+
+    return Renderer(device)
+
+
+def job_started(*_args) -> None:
+    """Blender's render_init: frames from now on share their scene's renderer."""
+    global _JOB
+    with _HELD_LOCK:
+        _JOB = {}
+
+
+def job_ended(*_args) -> None:
+    """Blender's render_complete or render_cancel: the job's renderers are dropped."""
+    global _JOB
+    with _HELD_LOCK:
+        _JOB = None
 
 
 def release_held() -> None:
     """Drop every held renderer (the add-on is disabled)."""
+    job_ended()
     with _HELD_LOCK:
         _HELD.clear()
 

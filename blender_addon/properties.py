@@ -13,6 +13,8 @@ import bpy
 from gpu_core.settings import PRESETS, RenderSettings, knobs
 
 _PRESET_KEYS = set(PRESETS["draft"])
+# samples of a material preview when Viewport Samples is 0 (the viewport then refines until stopped)
+MATERIAL_PREVIEW_SAMPLES = 64
 
 # True while a preset writes its values, so those writes keep the preset
 _applying_preset = False
@@ -103,7 +105,9 @@ class GpuGiSceneSettings(bpy.types.PropertyGroup):
         """gpu_core settings for a final render, or for the viewport/previews."""
         values = {f.name: knob_value(self, f.name) for f in knobs()}
         if preview:
-            values["samples"], values["denoise"] = values["preview_samples"], values["preview_denoise"]
+            # 0 Viewport Samples (until stopped) gives a material preview MATERIAL_PREVIEW_SAMPLES
+            values["samples"] = values["preview_samples"] or MATERIAL_PREVIEW_SAMPLES
+            values["denoise"] = values["preview_denoise"]
         return RenderSettings(**values, transparent_background=transparent)
 
 

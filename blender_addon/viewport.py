@@ -1,10 +1,18 @@
-"""Rendered viewport: the scene is exported on the main thread, a worker
+"""Rendered viewport: the scene is synced on the main thread, a worker
 thread renders it, view_draw shows the latest image.
 
-The worker renders a coarse image first (a quarter of the resolution, one
-sample), then the full one (denoised when Denoise Viewport is on); an edit or a view change stops it between two
-kernel batches and starts it again. Nothing here touches Blender data: the
-engine passes exported scenes, cameras and settings in.
+After an edit or a view change the worker renders a coarse image first (a
+quarter of the resolution, one sample), then the full resolution with one
+sample, then keeps adding samples (1, 2, 4, ... per pass, up to
+``MAX_PASS_SAMPLES``) into an accumulation buffer until Viewport Samples
+(0: until stopped), denoising the last when Denoise Viewport is on. The
+passes of one view share everything the renderer holds: the photon maps,
+the kd-tree and the GI cache of the view are computed once, later passes
+only run the image kernel, numbered by ``sample_start`` so that together
+they are one render of all their samples. An edit names the parts it
+changed, which the renderer alone uploads and invalidates. Nothing here
+touches Blender data: the engine passes exported scenes, cameras and
+settings in.
 """
 
 from __future__ import annotations
@@ -15,12 +23,17 @@ from typing import Callable
 
 import numpy as np
 
+from gpu_core.denoise import denoise
 from gpu_core.errors import GpuGiError, RenderCancelled
 
 from .export.camera import pixel_filter, view_camera
 from .status import mode_line
 
 COARSE_FACTOR = 4
+# the denoiser's guides, accumulated beside the image
+DENOISE_GUIDES = ("Denoising Albedo", "Denoising Normal")
+# most samples one accumulation pass adds (a redraw at least every such pass)
+MAX_PASS_SAMPLES = 16
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +56,23 @@ def view_state(context) -> ViewState:
     return ViewState(camera=camera, signature=signature)
 
 
+def view_update_session(session: "ViewportSession", sync, context, depsgraph, pixel_size, updates) -> bool:
+    """What the engine's view_update does: sync the edits (``updates``, None
+    when not known) on this thread and hand the scene to the session;
+    True when rendering restarted."""
+    from .preferences import device_spec
+
+    scene = depsgraph.scene
+    view = view_state(context)
+    exported, edits = sync.export(depsgraph, view.camera, updates)
+    settings = scene.gpugi.render_settings(preview=True, transparent=scene.render.film_transparent)
+    settings = dataclasses.replace(settings, samples=scene.gpugi.preview_samples)  # 0: until stopped
+    job = Job(scene=exported, settings=settings, device_spec=device_spec(scene), pixel_size=pixel_size(scene),
+              edits=edits)
+    session.sync_stats = sync.stats.as_dict()
+    return session.update_scene(job, view.signature)
+
+
 def default_renderer(device_spec: str | None):
     """A gpu_core Renderer on the device named by the spec."""
     from gpu_core.device import get_device
@@ -53,12 +83,66 @@ def default_renderer(device_spec: str | None):
 
 @dataclasses.dataclass
 class Job:
-    """One render request: the scene and how to render it."""
+    """One render request: the scene, how to render it, and what changed."""
 
     scene: object  # gpu_core Scene
-    settings: object  # gpu_core RenderSettings
+    settings: object  # gpu_core RenderSettings (its samples: Viewport Samples, 0 = until stopped)
     device_spec: str | None
     pixel_size: int = 1
+    edits: set | None = None  # scene parts changed since the previous job (None: not known)
+
+
+@dataclasses.dataclass(frozen=True)
+class Pass:
+    """One render of the worker's sequence after an edit."""
+
+    factor: int  # resolution divisor
+    samples: int
+    start: int  # number of the pass's first sample (sample_start)
+    coarse: bool = False  # the quick low-resolution image, shown until the first full one
+
+
+def passes(job: Job):
+    """The worker's passes for ``job``: coarse, then full resolution with
+    doubling sample counts until the job's samples (forever when 0)."""
+    full = max(1, int(job.pixel_size))
+    yield Pass(COARSE_FACTOR * full, 1, 0, coarse=True)
+    target, done, step = int(job.settings.samples), 0, 1
+    while target <= 0 or done < target:
+        count = step if target <= 0 else min(step, target - done)
+        yield Pass(full, count, done)
+        done, step = done + count, min(2 * step, MAX_PASS_SAMPLES)
+
+
+class Accumulation:
+    """The full-resolution image of one view: the sample-weighted mean of
+    its passes, denoised after the last one when asked (guided by the mean
+    denoising albedo and normal)."""
+
+    def __init__(self, target: int, denoise: bool, quality: str):
+        self.target, self.denoise, self.quality = int(target), bool(denoise), quality
+        self.samples = 0
+        self._sums: dict[str, np.ndarray] = {}
+
+    def add(self, step: Pass, result_passes: dict) -> tuple[np.ndarray, str]:
+        """The image to show after ``step`` and its status label."""
+        if step.coarse:
+            return result_passes["Combined"], "preview"
+        for name in ("Combined", *DENOISE_GUIDES):
+            if name in result_passes:
+                weighted = result_passes[name] * np.float32(step.samples)
+                self._sums[name] = self._sums[name] + weighted if name in self._sums else weighted
+        self.samples += step.samples
+        image = self._sums["Combined"] / np.float32(self.samples)
+        label = f"sample {self.samples}" + (f"/{self.target}" if self.target > 0 else "")
+        if self.denoise and self.samples >= self.target > 0:
+            guides = [self._sums[name] / np.float32(self.samples) for name in DENOISE_GUIDES]
+            try:
+                image = denoise(image, guides[0], guides[1], self.quality)
+                label += ", denoised"
+            except GpuGiError as err:
+                label += f", not denoised: {err}"
+        return image, label
 
 
 class ViewportSession:
@@ -72,6 +156,7 @@ class ViewportSession:
         self._redraw = redraw
         self._make_renderer = make_renderer
         self._renderers: dict = {}
+        self._pending: dict = {}  # device spec -> parts edited since its renderer last rendered (None: unknown)
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -81,13 +166,24 @@ class ViewportSession:
         self._version = 0
         self.error: str | None = None
         self.status = ""
+        self.stats: dict = {}  # the last pass's render stats
+        self.sync_stats: dict = {}  # what the last sync exported (main thread)
+        self.samples = 0  # samples in the image shown (full resolution; 0 until the first full pass)
+        self.first_plan: list = []  # the stages of the first pass after the last restart: what the edit redid
 
     # -- main thread ----------------------------------------------------------
 
-    def update_scene(self, job: Job, signature: tuple) -> None:
-        """A new export (after an edit): render it from the start."""
+    def update_scene(self, job: Job, signature: tuple) -> bool:
+        """A new sync (after an edit): render it from the start, unless
+        nothing it renders changed; True when rendering restarted."""
+        unchanged = (self.job is not None and job.edits == set() and signature == self.signature
+                     and (job.settings, job.device_spec, job.pixel_size)
+                     == (self.job.settings, self.job.device_spec, self.job.pixel_size) and self.error is None)
+        if unchanged:
+            return False
         self.signature = signature
         self.restart(job)
+        return True
 
     def update_view(self, view: ViewState) -> bool:
         """Follow a view change seen in view_draw; True when rendering restarted."""
@@ -95,15 +191,19 @@ class ViewportSession:
             return False
         self.signature = view.signature
         scene = dataclasses.replace(self.job.scene, camera=view.camera)
-        self.restart(dataclasses.replace(self.job, scene=scene))
+        self.restart(dataclasses.replace(self.job, scene=scene, edits=set()))
         return True
 
     def restart(self, job: Job) -> None:
         """Stop the worker and start a new one on ``job``."""
         self.stop()
+        for spec in set(self._pending) | {job.device_spec}:
+            pending = self._pending.get(spec, set())
+            self._pending[spec] = None if pending is None or job.edits is None else pending | job.edits
         self.job = job
         self.error = None
         self.status = "GPU GI | rendering"
+        self.samples, self.first_plan = 0, []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._work, args=(job, self._stop), name="gpugi-viewport", daemon=True)
         self._thread.start()
@@ -129,19 +229,26 @@ class ViewportSession:
     def _work(self, job: Job, stop: threading.Event) -> None:
         try:
             renderer = self._renderer(job.device_spec)
-            for factor, samples, denoise, label in self._passes(job):
+            film = Accumulation(job.settings.samples, job.settings.denoise, job.settings.denoise_quality)
+            for step in passes(job):
                 if stop.is_set():
                     return
-                scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, factor))
-                settings = dataclasses.replace(job.settings, samples=samples, denoise=denoise)
-                result = renderer.render(scene, settings, should_stop=stop.is_set)
+                scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, step.factor))
+                guides = bool(job.settings.denoise) and not step.coarse
+                settings = dataclasses.replace(job.settings, samples=step.samples, denoise=False,
+                                               denoising_passes=guides)
+                edits, self._pending[job.device_spec] = self._pending.get(job.device_spec), set()
+                result = renderer.render(scene, settings, should_stop=stop.is_set, edits=edits,
+                                         sample_start=step.start)
                 if stop.is_set():
                     return
+                image, label = film.add(step, result.passes)
                 with self._lock:
-                    self._image = result.passes["Combined"]
+                    self._image = image
                     self._version += 1
-                triangles = result.stats.get("triangles", 0)
-                self.status = f"GPU GI | {mode_line(result.stats)} | {label}, {triangles} triangles"
+                self.stats, self.samples = result.stats, film.samples
+                self.first_plan = self.first_plan or list(result.stats.get("plan", []))
+                self.status = status_line(result, label)
                 self._notify()
         except RenderCancelled:
             return
@@ -149,15 +256,6 @@ class ViewportSession:
             self._fail(str(err))
         except Exception as err:  # a worker must never take Blender down
             self._fail(f"internal error ({type(err).__name__}): {err}")
-
-    def _passes(self, job: Job):
-        """(resolution divisor, samples, denoised, label) of each image the
-        worker renders: the coarse one never denoised, the full one when
-        the settings ask (Denoise Viewport)."""
-        full = max(1, int(job.pixel_size))
-        yield COARSE_FACTOR * full, 1, False, "preview"
-        denoise = bool(job.settings.denoise)
-        yield full, job.settings.samples, denoise, f"{job.settings.samples} samples" + (", denoised" if denoise else "")
 
     def _renderer(self, device_spec):
         if device_spec not in self._renderers:
@@ -174,6 +272,16 @@ class ViewportSession:
             self._redraw()
         except ReferenceError:
             self._stop.set()  # the engine is gone; nothing will draw this
+
+
+def status_line(result, label: str) -> str:
+    """The viewport's status after a pass: mode, progress, triangles, and
+    the first warning of the scene (with how many more there are)."""
+    line = f"GPU GI | {mode_line(result.stats)} | {label}, {result.stats.get('triangles', 0)} triangles"
+    if result.warnings:
+        more = len(result.warnings) - 1
+        line += f" | warning: {result.warnings[0]}" + (f" (+{more} more)" if more else "")
+    return line
 
 
 def scaled_camera(camera, factor: int):

@@ -378,8 +378,9 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
     uint aa_x = Rng_hash(pixel_id ^ Rng_hash(job.seed ^ 0xa511e9b3U));
     uint aa_y = Rng_hash(aa_x);
     for (int s = 0; s < job.samples; ++s) {
-        Rng rng = Rng_make(pixel_id, (uint)s, job.seed);
-        float2 aa = Rng_r2((uint)s, aa_x, aa_y);
+        uint number = (uint)(job.sample_start + s); /* the path's number among all the pixel's passes */
+        Rng rng = Rng_make(pixel_id, number, job.seed);
+        float2 aa = Rng_r2(number, aa_x, aa_y);
         ImagePath path;
         float sx = (float)px + 0.5f + Image_filter_offset(pixel_filter, aa.x);
         float sy = (float)py + 0.5f + Image_filter_offset(pixel_filter, aa.y);

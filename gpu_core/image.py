@@ -60,9 +60,11 @@ def _ladder(pixels: int, limit: int) -> int:
 
 
 def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: RenderSettings, defines: dict,
-                 gi_field=None, progress=None, should_stop=None) -> tuple[dict[str, np.ndarray], int]:
+                 gi_field=None, progress=None, should_stop=None, sample_start: int = 0
+                 ) -> tuple[dict[str, np.ndarray], int]:
     """The passes of the render window (rows from the bottom) and the number
-    of launches. ``gi_field``: the GI cache grid (GI mode), else None."""
+    of launches. ``gi_field``: the GI cache grid (GI mode), else None;
+    ``sample_start``: the number of each pixel's first camera path."""
     x0, y0, x1, y1 = scene.camera.pixel_window
     w, h = x1 - x0, y1 - y0
     total = w * h
@@ -79,6 +81,7 @@ def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: 
     job["samples"], job["max_bounces"], job["max_diffuse"] = settings.samples, settings.max_bounces, diffuse
     job["light_samples"], job["seed"], job["clamp"] = settings.light_samples, settings.seed, settings.clamp
     job["outputs"], job["gi_subpixels"] = outputs, gi_field.subpixels if gi_field is not None else 1
+    job["sample_start"] = sample_start
     kernel = device.kernel(PROGRAM, "Image_pixels", defines)
     scene_args = buffers.kernel_args(settings.transparent_background)
     pixel_filter = device.to_device(filter_table(scene.camera.filter_kind, scene.camera.filter_width))

@@ -30,18 +30,22 @@ from .settings import RenderSettings
 _PHOTON_KNOBS = ("global_photons", "caustic_photons", "seed", "photon_k", "max_bounces")
 # scene parts the photon maps are made from
 _PHOTON_PARTS = ("geometry", "materials", "lights", "world")
+# settings the GI cache reads beyond the photon maps': a change runs its stages again
+_CACHE_KNOBS = ("gi_subpixels", "cache_seeds", "cache_alpha", "cut_delta", "gather_rays")
 
 
 @dataclass
 class Held:
     """What a renderer keeps on the device between renders, as the plan
     sees it: each part's digest and generation (bumped at every change),
-    the tables uploaded, and the key of the photon maps held."""
+    the tables uploaded, and the keys of the photon maps and of the GI
+    cache (irradiance on the shading-point grid) held."""
 
     digests: dict | None = None  # part -> digest of what is uploaded (None: unknown)
     generations: dict = field(default_factory=lambda: {part: 0 for part in PARTS})
     tables: SceneTables | None = None
     photon_key: tuple | None = None
+    cache_key: tuple | None = None
 
 
 @dataclass
@@ -51,13 +55,15 @@ class Plan:
     mode: str
     stages: list[str]  # stages and features in order; "_reused" where kept from an earlier render
     changed: set[str]  # scene parts uploaded
-    digests: dict | None  # the scene's part digests (None when the caller named the edits)
+    digests: dict  # the scene's part digests (None for a part the caller named as edited: not hashed)
     generations: dict  # part generations after this render's changes
     tables: SceneTables
     emitters: list[Emitter]
     photon_maps: dict[str, str]  # map -> "built..." or "skipped: why"
     photons_reused: bool  # the maps held are used again
     photon_key: tuple | None  # of the maps this render uses
+    cache_reused: bool  # the GI cache held (same view, scene and settings) is used again
+    cache_key: tuple | None  # of the GI cache this render uses
     scene_defines: dict  # program features of every kernel that reads the scene
     image_defines: dict  # the image kernel's, scene features included
     programs: list[tuple[str, dict]]  # every program the render builds
@@ -83,13 +89,20 @@ class Plan:
 def changed_parts(scene: Scene, held: Held, edits: set[str] | None) -> tuple[set[str], dict | None]:
     """The parts that differ from what is held (all when nothing is), and
     the scene's part digests; ``edits`` (named by the caller, who knows what
-    it changed) skips the hashing."""
+    it changed) skips the hashing of every part but the camera, which is
+    always compared (it is small, and views change without an edit)."""
     if edits is not None:
-        return (set(PARTS) if held.tables is None else set(edits) & set(PARTS)), None
+        camera = part_digests(scene, ("camera",))["camera"]
+        if held.tables is None or held.digests is None:
+            return set(PARTS), {part: None for part in PARTS} | {"camera": camera}
+        named = set(edits) & set(PARTS)
+        # an edited part's digest is unknown until hashed; the others' stay
+        digests = {part: None if part in named else held.digests[part] for part in PARTS} | {"camera": camera}
+        return named | ({"camera"} if camera != held.digests["camera"] else set()), digests
     digests = part_digests(scene)
     if held.digests is None or held.tables is None:
         return set(PARTS), digests
-    return {part for part in PARTS if digests[part] != held.digests[part]}, digests
+    return {part for part in PARTS if held.digests[part] is None or digests[part] != held.digests[part]}, digests
 
 
 def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits: set[str] | None = None,
@@ -111,6 +124,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if "light_passes" in stages:
         image_defines["IMAGE_LIGHT_PASSES"] = 1
     emitters, maps, photon_key, reuse, reused = [], {}, None, {}, False
+    cache_key, cache_reused = None, False
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1
         emitters = emitter_powers(scene, tables)
@@ -120,14 +134,20 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         reused = photon_key == held.photon_key
         if reused:
             reuse["photons"] = "neither the lit scene nor the photon settings changed"
-        stages += _gi_stages(maps, reused)
+        cache_key = (photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS)
+                     + tuple(generations[p] for p in PARTS))
+        cache_reused = cache_key == held.cache_key
+        if cache_reused:
+            reuse["gi_cache"] = "neither the view, the scene nor the GI settings changed"
+        stages += _gi_stages(maps, reused, cache_reused)
     if settings.denoise:
         stages.append("denoise")
     if "geometry" not in changed:
         reuse["kdtree"] = "the triangles did not change"
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
-        emitters=emitters, photon_maps=maps, photons_reused=reused, photon_key=photon_key, scene_defines=scene_defines,
+        emitters=emitters, photon_maps=maps, photons_reused=reused, photon_key=photon_key, cache_reused=cache_reused,
+        cache_key=cache_key, scene_defines=scene_defines,
         image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
     the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
     if device is not None and hasattr(device, "device"):
@@ -155,18 +175,20 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
     return features
 
 
-def _gi_stages(maps: dict[str, str], reused: bool) -> list[str]:
+def _gi_stages(maps: dict[str, str], photons_reused: bool, cache_reused: bool) -> list[str]:
     """The GI stages: the photon maps traced (or reused), then the cache
-    stages where there is light, and caustics where there is a caustic map."""
-    stages = [f"{name}_photons" + ("_reused" if reused else "") for name in ("global", "caustic")
+    stages where there is light, and caustics where there is a caustic map
+    (each "_reused" when the cache held is used again)."""
+    stages = [f"{name}_photons" + ("_reused" if photons_reused else "") for name in ("global", "caustic")
               if maps[name].startswith("built")]
+    cache = []
     if maps["global"].startswith("built"):
-        stages += ["shading_points", "sample_points", "illumination_cut", "final_gather", "interpolation"]
+        cache += ["shading_points", "sample_points", "illumination_cut", "final_gather", "interpolation"]
     elif maps["caustic"].startswith("built"):
-        stages.append("shading_points")
+        cache.append("shading_points")
     if maps["caustic"].startswith("built"):
-        stages.append("caustics")
-    return stages
+        cache.append("caustics")
+    return stages + [stage + ("_reused" if cache_reused else "") for stage in cache]
 
 
 # device bytes per item, generous estimates (the kd-tree's own arrays vary with the scene)
@@ -206,5 +228,6 @@ def _programs(device, settings: RenderSettings, the_plan: Plan) -> list[tuple[st
     if settings.mode == "gi":
         if the_plan.traces_photons:
             wanted += photon_trace.programs(the_plan.scene_defines)
-        wanted += gi_pipeline.programs(device, settings, the_plan.stages, the_plan.scene_defines)
+        if not the_plan.cache_reused:
+            wanted += gi_pipeline.programs(device, settings, the_plan.stages, the_plan.scene_defines)
     return wanted + image_programs(the_plan.image_defines)

@@ -21,13 +21,13 @@ from .denoise import denoise
 from .device import Device
 from .device.timer import StageTimer
 from .errors import GpuGiError, check_stop
-from .gi.pipeline import render_gi
+from .gi.pipeline import GiField, render_gi
 from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
 from .scene.model import Scene
 from .scene.upload import SceneBuffers, upload
-from .scene.validate import validate
+from .scene.validate import LastValidated
 from .settings import RenderSettings
 
 
@@ -48,19 +48,29 @@ class Renderer:
         self._held = Held()
         self._buffers: SceneBuffers | None = None
         self._maps: PhotonMaps | None = None
+        self._cache: GiField | None = None
+        self._unsynced: set[str] = set()  # parts named in edits and not uploaded yet (a render was stopped)
+        self._validate = LastValidated()
 
     def render(self, scene: Scene, settings: RenderSettings | None = None,
                progress: Callable[[float, str], None] | None = None,
-               should_stop: Callable[[], bool] | None = None, edits: set[str] | None = None) -> RenderResult:
+               should_stop: Callable[[], bool] | None = None, edits: set[str] | None = None,
+               sample_start: int = 0) -> RenderResult:
         """Render ``scene``; ``edits``, when the caller knows them, names the
-        parts changed since this renderer's last render (scene/model.py PARTS)."""
+        parts changed since this renderer's last call (scene/model.py PARTS;
+        the camera is compared anyway). ``sample_start`` numbers the first
+        camera path of every pixel: renders of ``samples`` paths from 0,
+        ``samples``, 2 ``samples``... average to one render of all of them
+        (progressive refinement)."""
         settings = (settings or RenderSettings()).validated()
+        if edits is not None:
+            edits = self._unsynced = set(edits) | self._unsynced
         keep_guides = settings.denoising_passes
         if settings.denoise:  # the denoiser's guides are the denoising albedo and normal
             settings = replace(settings, denoising_passes=True)
         timer = StageTimer(getattr(self.device, "queue", None))
         with timer.stage("validate"):
-            scene = validate(scene)
+            scene = self._validate(scene)
             the_plan = plan(scene, settings, self._held, edits, self.device)
         the_plan.check_budget(self.device)
         moved = self.device.transfers()
@@ -76,13 +86,11 @@ class Renderer:
             with timer.stage("photons"):
                 maps = self._photon_maps(the_plan, settings)
             check_stop(should_stop)
-            field_ = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
-                               the_plan.stages, the_plan.scene_defines, timer, should_stop)
-            field_.stats["photons_reused"] = not the_plan.traces_photons
+            field_ = self._gi_cache(scene, settings, the_plan, maps, timer, should_stop)
             check_stop(should_stop)
         with timer.stage("render"):
             passes, batches = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
-                                           field_, progress, should_stop)
+                                           field_, progress, should_stop, sample_start)
         warnings, denoised = self._warnings(scene), False
         if settings.denoise:
             if progress is not None:
@@ -104,6 +112,7 @@ class Renderer:
                                should_stop)
         self._held.digests, self._held.generations = the_plan.digests, the_plan.generations
         self._held.tables = the_plan.tables
+        self._unsynced = set()
 
     def _photon_maps(self, the_plan: Plan, settings: RenderSettings) -> PhotonMaps:
         """The plan's photon maps: traced, or the ones held when it says they are reused."""
@@ -116,6 +125,18 @@ class Renderer:
                                 the_plan.scene_defines)
         self._held.photon_key = the_plan.photon_key
         return self._maps
+
+    def _gi_cache(self, scene: Scene, settings: RenderSettings, the_plan: Plan, maps: PhotonMaps,
+                  timer: StageTimer, should_stop) -> GiField:
+        """The GI cache of this view: computed by the GI stages, or the one
+        held when the plan says it is reused (only the image runs again)."""
+        if the_plan.cache_reused and self._cache is not None:
+            return self._cache
+        self._held.cache_key, self._cache = None, None
+        field_ = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
+                           the_plan.stages, the_plan.scene_defines, timer, should_stop)
+        self._held.cache_key, self._cache = the_plan.cache_key, field_
+        return field_
 
     # -- report --------------------------------------------------------------------
 
@@ -140,7 +161,8 @@ class Renderer:
             **scene.report.as_stats(),
         }
         if field_ is not None:
-            stats["gi"] = field_.stats
+            stats["gi"] = {**field_.stats, "photons_reused": not the_plan.traces_photons,
+                           "cache_reused": the_plan.cache_reused}
         return stats
 
     def _warnings(self, scene: Scene) -> list[str]:

@@ -55,8 +55,8 @@ class RenderSettings:
                      blender_default="gi")
     samples: int = knob(16, "Samples", "Camera paths per pixel (final render): anti-aliasing and light sampling",
                         panel="sampling", text="Render", minimum=1, soft_max=1024)
-    preview_samples: int = knob(4, "Viewport Samples", "Camera paths per pixel in the viewport", panel="sampling",
-                                text="Viewport", minimum=1, soft_max=256)
+    preview_samples: int = knob(32, "Viewport Samples", "Camera paths per pixel the viewport accumulates after an "
+                                "edit (0: until stopped)", panel="sampling", text="Viewport", minimum=0, soft_max=1024)
     seed: int = knob(0, "Seed", "Noise pattern", panel="sampling", minimum=0)
     clamp: float = knob(0.0, "Clamp", "Largest radiance of one sample (0 disables clamping)", panel="sampling",
                         minimum=0.0)

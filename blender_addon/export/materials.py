@@ -23,12 +23,15 @@ _PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", 
 class MaterialTable:
     """Material rows and textures, one row per distinct Blender material."""
 
-    def __init__(self):
+    def __init__(self, pixels: dict | None = None):
+        """``pixels``: image name -> linear pixels read before, kept by the
+        caller across tables (an image is read once until it is edited)."""
         self.rows: list[dict] = [{**DEFAULT_ROW, "name": "default"}]
         self.textures: list[np.ndarray] = []
         self.warnings: list[str] = []
         self._index: dict = {None: 0}
         self._images: dict = {}
+        self._pixels = {} if pixels is None else pixels
 
     def index(self, material) -> int:
         """Row of ``material`` (None = the default row), exported on first use.
@@ -176,7 +179,9 @@ class MaterialTable:
             self._warn(f"material '{name}': texture coordinates on {node.name} are not supported; used the UV map")
         key = image.name_full
         if key not in self._images:
-            pixels = image_pixels(image)
+            if key not in self._pixels:
+                self._pixels[key] = image_pixels(image)
+            pixels = self._pixels[key]
             if pixels is None:
                 self._warn(f"material '{name}': image '{image.name}' has no pixels (missing file?); used the socket's colour")
                 return -1

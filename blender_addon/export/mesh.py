@@ -25,18 +25,26 @@ class LocalMesh:
 
 
 class MeshCache:
-    """Local meshes, each exported once however often it is instanced."""
+    """Local meshes, each exported once however often it is instanced, and
+    kept until its object's or its data's geometry is edited."""
 
     def __init__(self):
         self._meshes: dict = {}
+        self.triangulated = 0  # meshes read from Blender so far
 
     def local_mesh(self, obj) -> LocalMesh | None:
         """The triangulated evaluated mesh of ``obj``, or None if it has no faces."""
         data = obj.data
-        key = (obj.name_full, data.as_pointer() if data is not None else 0)
+        key = (obj.name_full, data.name_full if data is not None else "", data.as_pointer() if data is not None else 0)
         if key not in self._meshes:
             self._meshes[key] = _triangulate(obj)
+            self.triangulated += 1
         return self._meshes[key]
+
+    def forget(self, name: str) -> None:
+        """Drop the meshes of the object or data named ``name`` (its geometry changed)."""
+        for key in [k for k in self._meshes if name in (k[0], k[1])]:
+            del self._meshes[key]
 
 
 def _triangulate(obj) -> LocalMesh | None:

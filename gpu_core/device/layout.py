@@ -179,7 +179,8 @@ IMAGE_JOB = Struct("ImageJob", "what one launch of the image kernel renders", [
     ("clamp", "float", "largest radiance of one path; 0 = off"),
     ("outputs", "int", "OUTPUT_* flags"),
     ("gi_subpixels", "int", "GI mode: shading points per pixel side of the cache grid"),
-    ("pad", "int", "", 2),
+    ("sample_start", "int", "number of the first camera path of each pixel (progressive refinement)"),
+    ("pad", "int", ""),
 ])
 
 STRUCTS = (KD_NODE, MATERIAL, LIGHT, CAMERA, TEXTURE_INFO, POINT_NODE, BUILD_NODE, CHUNK, BUILD_SUMS,

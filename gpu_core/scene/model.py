@@ -245,21 +245,22 @@ class Scene:
 PARTS = ("geometry", "materials", "lights", "world", "camera")
 
 
-def part_digests(scene: Scene) -> dict[str, bytes]:
-    """A digest of each part: renders whose parts have the same digests can
-    share what was built from those parts (kd-tree, tables, photon maps)."""
-    m, lights = scene.materials, scene.lights
+def part_digests(scene: Scene, parts=PARTS) -> dict[str, bytes]:
+    """A digest of each of ``parts``: renders whose parts have the same
+    digests can share what was built from those parts (kd-tree, tables,
+    photon maps, the GI cache)."""
+    m, lights, camera = scene.materials, scene.lights, scene.camera
     arrays = {
-        "geometry": [scene.triangles, scene.normals, scene.uvs, scene.material_ids],
-        "materials": [getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures),
-        "lights": [getattr(lights, f.name) for f in fields(Lights) if f.name != "names"],
-        "world": [scene.world_color],
-        "camera": [np.asarray(scene.camera.matrix), np.asarray(scene.camera.window),
-                   np.array([scene.camera.width, scene.camera.height, scene.camera.kind, scene.camera.clip_start,
-                             scene.camera.clip_end, *(scene.camera.border or (-1, -1, -1, -1)),
-                             scene.camera.filter_kind, scene.camera.filter_width], np.float64)],
+        "geometry": lambda: [scene.triangles, scene.normals, scene.uvs, scene.material_ids],
+        "materials": lambda: [getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures),
+        "lights": lambda: [getattr(lights, f.name) for f in fields(Lights) if f.name != "names"],
+        "world": lambda: [scene.world_color],
+        "camera": lambda: [np.asarray(camera.matrix), np.asarray(camera.window),
+                           np.array([camera.width, camera.height, camera.kind, camera.clip_start, camera.clip_end,
+                                     *(camera.border or (-1, -1, -1, -1)), camera.filter_kind, camera.filter_width],
+                                    np.float64)],
     }
-    return {part: _digest(values) for part, values in arrays.items()}
+    return {part: _digest(arrays[part]()) for part in parts}
 
 
 def _digest(arrays) -> bytes:

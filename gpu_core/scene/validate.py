@@ -4,6 +4,8 @@ make an image)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..errors import SceneError
@@ -179,3 +181,25 @@ def _check_camera(camera: Camera) -> None:
         raise SceneError(f"camera clipping {camera.clip_start}..{camera.clip_end} is empty")
 
 
+
+
+class LastValidated:
+    """``validate`` that remembers its last scene: a scene holding the very
+    same arrays and tables (a camera aside) is not checked again, only its
+    camera. Callers put new arrays in a scene for what changed and never
+    write into one already rendered (the viewport's passes share them)."""
+
+    def __init__(self):
+        self._inputs: tuple = ()
+        self._scene: Scene | None = None
+
+    def __call__(self, scene: Scene) -> Scene:
+        inputs = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.materials, scene.lights,
+                  scene.world_color, scene.warnings, *scene.textures)
+        if self._scene is not None and len(inputs) == len(self._inputs) and all(
+                a is b for a, b in zip(inputs, self._inputs)):
+            _check_camera(scene.camera)
+            return replace(self._scene, camera=scene.camera)
+        validated = validate(scene)
+        self._inputs, self._scene = inputs, validated
+        return validated

@@ -59,3 +59,27 @@ def test_turning_persistent_data_off_gives_the_held_renderer_back(bpy_module, tm
     scene.render.use_persistent_data = False
     _frame(bpy_module, scene, tmp_path / "2.exr")
     assert not final._HELD
+
+
+def test_an_animation_keeps_its_renderer_across_frames_without_persistent_data(bpy_module, tmp_path):
+    scene = _box_torus(bpy_module, False)
+    camera = scene.camera
+    camera.keyframe_insert("location", frame=1)
+    camera.location.x += 0.2
+    camera.keyframe_insert("location", frame=2)
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.render.engine = "GPUGI"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = str(tmp_path / "frame_")
+    plans = []
+    listener = lambda scene, depsgraph=None: plans.append(list(LAST_RUN.get("stats", {}).get("plan", [])))  # noqa: E731
+    bpy_module.app.handlers.render_post.append(listener)
+    try:
+        bpy_module.ops.render.render(animation=True, scene=scene.name)
+    finally:
+        bpy_module.app.handlers.render_post.remove(listener)
+    assert len(plans) == 2 and not LAST_RUN.get("error")
+    assert {"kdtree", "global_photons"} <= set(plans[0])
+    assert {"kdtree_reused", "global_photons_reused"} <= set(plans[1])  # only the camera moved
+    assert final._JOB is None and not final._HELD  # the job's renderer is given back when it ends
+    assert sorted(os.listdir(tmp_path)) == ["frame_0001.exr", "frame_0002.exr"]

@@ -4,6 +4,7 @@ the worker scheduler with a fake renderer, the view camera from fake contexts.""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import threading
 import time
 from types import SimpleNamespace
@@ -13,7 +14,7 @@ import pytest
 
 from blender_addon.display import DISPLAY_MAX, prepare_pixels
 from blender_addon.engine import GpuGiRenderEngine
-from blender_addon.viewport import COARSE_FACTOR, Job, ViewportSession, view_state
+from blender_addon.viewport import COARSE_FACTOR, Job, ViewportSession, passes, view_state
 from gpu_core.scene import FILTER_BLACKMAN_HARRIS, FILTER_BOX
 from gpu_core.errors import DeviceError, RenderCancelled
 from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Lights
@@ -155,19 +156,26 @@ def test_the_view_camera_takes_the_film_filter_and_a_filter_edit_changes_the_sig
 
 
 class FakeRenderer:
-    """Records each render; ``block`` makes a render wait until it is asked to stop."""
+    """Records each render; ``block`` makes a render wait until it is asked
+    to stop. The image of the n-th render is n everywhere."""
 
     def __init__(self, block=False, error=None):
         self.calls: list[tuple[int, int, int]] = []
+        self.starts: list[int] = []
+        self.edits: list = []
         self.denoised: list[bool] = []
+        self.guides: list[bool] = []
         self.block = block
         self.error = error
         self.started = threading.Event()
 
-    def render(self, scene, settings, progress=None, should_stop=None):
+    def render(self, scene, settings, progress=None, should_stop=None, edits=None, sample_start=0):
         cam = scene.camera
         self.calls.append((cam.width, cam.height, settings.samples))
+        self.starts.append(sample_start)
+        self.edits.append(edits)
         self.denoised.append(settings.denoise)
+        self.guides.append(settings.denoising_passes)
         self.started.set()
         if self.error is not None:
             raise self.error
@@ -176,13 +184,18 @@ class FakeRenderer:
                 raise RenderCancelled("render cancelled")
             time.sleep(0.005)
         image = np.full((cam.height, cam.width, 4), float(len(self.calls)), np.float32)
-        return SimpleNamespace(passes={"Combined": image}, stats={"triangles": 2}, warnings=[])
+        passes = {"Combined": image}
+        if settings.denoising_passes:
+            passes["Denoising Albedo"] = np.full((cam.height, cam.width, 3), 0.5, np.float32)
+            passes["Denoising Normal"] = np.zeros((cam.height, cam.width, 3), np.float32)
+            passes["Denoising Normal"][..., 2] = 1.0
+        return SimpleNamespace(passes=passes, stats={"triangles": 2}, warnings=[])
 
 
-def _job(width=64, height=32, samples=8, pixel_size=1, denoise=False):
+def _job(width=64, height=32, samples=8, pixel_size=1, denoise=False, edits=None):
     camera = dataclasses.replace(camera_looking_down(), width=width, height=height)
     return Job(scene=plane_scene(Lights.make([]), camera), settings=RenderSettings(samples=samples, denoise=denoise),
-               device_spec=None, pixel_size=pixel_size)
+               device_spec=None, pixel_size=pixel_size, edits=edits)
 
 
 def _session(renderer):
@@ -198,25 +211,67 @@ def _wait(session):
     assert not session.busy
 
 
-def test_worker_renders_coarse_first_then_full_and_asks_for_redraws():
+def test_worker_renders_coarse_then_accumulates_full_passes_up_to_the_viewport_samples():
     renderer = FakeRenderer()
     session, redraws = _session(renderer)
     session.update_scene(_job(samples=8), signature=("view", 1))
     _wait(session)
-    assert renderer.calls == [(64 // COARSE_FACTOR, 32 // COARSE_FACTOR, 1), (64, 32, 8)]
+    coarse = (64 // COARSE_FACTOR, 32 // COARSE_FACTOR, 1)
+    assert renderer.calls == [coarse, (64, 32, 1), (64, 32, 2), (64, 32, 4), (64, 32, 1)]
+    assert renderer.starts == [0, 0, 1, 3, 7]  # the full passes number their samples on from each other
     image, version = session.latest()
-    assert image.shape == (32, 64, 4) and version == 2 and len(redraws) == 2
+    # the sample-weighted mean of the full passes (the n-th render's image is n)
+    np.testing.assert_allclose(image, (1 * 2 + 2 * 3 + 4 * 4 + 1 * 5) / 8)
+    assert image.shape == (32, 64, 4) and version == 5 and len(redraws) == 5
+    assert session.samples == 8 and session.status.endswith("sample 8/8, 2 triangles")
     assert session.error is None
 
 
+def test_pass_schedule_doubles_up_to_its_cap_and_never_ends_at_zero_samples():
+    counts = [step.samples for step in itertools.islice(passes(_job(samples=0)), 8)]
+    assert counts == [1, 1, 2, 4, 8, 16, 16, 16]
+    assert sum(step.samples for step in passes(_job(samples=100)) if not step.coarse) == 100
+
+
 @pytest.mark.parametrize("denoise", [False, True])
-def test_only_the_full_image_is_denoised_and_only_when_asked(denoise):
+def test_only_the_accumulated_full_image_is_denoised_and_only_when_asked(denoise):
     renderer = FakeRenderer()
     session, _ = _session(renderer)
-    session.update_scene(_job(samples=8, denoise=denoise), signature=("view", 1))
+    session.update_scene(_job(samples=4, denoise=denoise), signature=("view", 1))
     _wait(session)
-    assert renderer.denoised == [False, denoise]
-    assert session.status.endswith("8 samples, denoised, 2 triangles" if denoise else "8 samples, 2 triangles")
+    assert renderer.denoised == [False] * 4  # the renderer never denoises a pass; the session does, at the end
+    assert renderer.guides == [False] + [denoise] * 3
+    assert session.status.endswith("sample 4/4, denoised, 2 triangles" if denoise else "sample 4/4, 2 triangles")
+
+
+def test_edits_reach_the_first_render_only_and_a_cancelled_job_passes_its_edits_on():
+    renderer = FakeRenderer(block=True)
+    session, _ = _session(renderer)
+    session.update_scene(_job(edits={"geometry"}), signature=("view", 1))
+    assert renderer.started.wait(5)
+    renderer.block = False
+    session.update_scene(_job(edits={"lights"}), signature=("view", 1))
+    _wait(session)
+    # the first job's render took its edits; the second's first render the new ones
+    assert renderer.edits[0] == {"geometry"} and renderer.edits[1] == {"lights"}
+    assert all(edits == set() for edits in renderer.edits[2:])
+    unknown = FakeRenderer()
+    session, _ = _session(unknown)
+    session.update_scene(_job(edits=None), signature=("view", 1))
+    _wait(session)
+    assert unknown.edits[0] is None  # not known: the renderer compares every part
+
+
+def test_a_sync_that_changed_nothing_does_not_restart():
+    renderer = FakeRenderer()
+    session, _ = _session(renderer)
+    assert session.update_scene(_job(edits=None), signature=("view", 1))
+    _wait(session)
+    calls = len(renderer.calls)
+    assert not session.update_scene(_job(edits=set()), signature=("view", 1))
+    assert session.update_scene(_job(edits=set(), samples=16), signature=("view", 1))  # a setting changed
+    _wait(session)
+    assert len(renderer.calls) > calls
 
 
 def test_pixel_size_preference_divides_the_full_resolution():
@@ -237,7 +292,7 @@ def test_same_view_does_not_restart_and_a_new_view_does():
     moved_cam = dataclasses.replace(session.job.scene.camera, width=40, height=20)
     assert session.update_view(SimpleNamespace(signature=("view", 2), camera=moved_cam)) is True
     _wait(session)
-    assert renderer.calls[-1] == (40, 20, 8)
+    assert renderer.calls[-1][:2] == (40, 20) and session.samples == 8
 
 
 def test_an_edit_stops_the_running_render_between_batches():
@@ -251,7 +306,7 @@ def test_an_edit_stops_the_running_render_between_batches():
     session.update_scene(_job(width=16, height=16), signature=("view", 2))
     assert not first_thread.is_alive()
     _wait(session)
-    assert renderer.calls[-1] == (16, 16, 8)
+    assert renderer.calls[-1][:2] == (16, 16) and session.samples == 8
     assert session.error is None
 
 
@@ -310,6 +365,7 @@ class StandInEngine:
 
     def __init__(self):
         self._viewport = None
+        self._sync = None
         self._drawer = RecordingDrawer()
         self._reported_error = None
         self.reports: list[tuple[set, str]] = []
@@ -350,9 +406,9 @@ def test_engine_viewport_callbacks_render_and_follow_the_view(bpy_empty):
     _wait(engine._viewport)
     view_draw(engine, near, depsgraph)
     pixels, version, width, height = engine._drawer.draws[-1]
-    assert (width, height) == (32, 24) and pixels.shape == (24, 32, 4) and version == 2
+    assert (width, height) == (32, 24) and pixels.shape == (24, 32, 4) and version == 3
     assert np.isfinite(pixels).all() and pixels[..., :3].min() > 0  # the lit plane fills the view
-    assert engine.stats[-1].startswith("GPU GI | gi | 2 samples")  # GI is the add-on's default mode
+    assert engine.stats[-1].startswith("GPU GI | gi | sample 2/2")  # GI is the add-on's default mode
 
     # orbiting only calls view_draw: a new view restarts the worker with the new camera
     far = _viewport_context(bpy, 40, 20, 50.0)
@@ -360,7 +416,7 @@ def test_engine_viewport_callbacks_render_and_follow_the_view(bpy_empty):
     _wait(engine._viewport)
     view_draw(engine, far, depsgraph)
     pixels, version, width, height = engine._drawer.draws[-1]
-    assert (width, height) == (40, 20) and version == 4
+    assert (width, height) == (40, 20) and version == 6
     assert engine._viewport.job.scene.camera.width == 40
     engine._viewport.stop()
 

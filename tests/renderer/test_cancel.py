@@ -4,6 +4,7 @@ RenderCancelled, and the next render of the same renderer is unchanged."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -13,6 +14,10 @@ from test_threads import GI, scene
 from gpu_core.errors import RenderCancelled
 from gpu_core.gi import gather
 from gpu_core.renderer import Renderer
+
+# GI with another cache setting: alternating the two, every render runs the
+# GI cache stages again (a render with the same settings would reuse them)
+OTHER = dataclasses.replace(GI, cache_alpha=GI.cache_alpha + 0.1)
 
 
 def _polls(renderer, the_scene, settings) -> int:
@@ -25,7 +30,7 @@ def test_every_gi_stage_and_gather_batch_is_followed_by_a_poll(device, monkeypat
     the_scene = scene(True, 20)  # a mirror: the caustic map and its stage too
     renderer = Renderer(device)
     renderer.render(the_scene, GI)  # programs ready: no poll while waiting for builds
-    one_batch = _polls(renderer, the_scene, GI)
+    one_batch = _polls(renderer, the_scene, OTHER)
     # polls after compile, upload, photons, shading points, sample points, cut,
     # gather, interpolation, and the GI field before the image
     assert one_batch >= 9
@@ -37,8 +42,8 @@ def test_stopping_at_any_poll_cancels_and_the_next_render_is_unchanged(device):
     the_scene = scene(True, 20)
     renderer = Renderer(device)
     expected = renderer.render(the_scene, GI).passes["Combined"]
-    for stop_at in range(_polls(renderer, the_scene, GI)):
+    for stop_at in range(_polls(renderer, the_scene, OTHER)):
         calls = itertools.count()
         with pytest.raises(RenderCancelled):
-            renderer.render(the_scene, GI, should_stop=lambda: next(calls) >= stop_at)
+            renderer.render(the_scene, OTHER, should_stop=lambda: next(calls) >= stop_at)
         np.testing.assert_array_equal(renderer.render(the_scene, GI).passes["Combined"], expected)

@@ -76,8 +76,35 @@ def test_settings_photon_tracing_does_not_read_keep_the_photon_maps():
 def test_edits_named_by_the_caller_skip_the_hashing():
     held = held_after(room(), GI)
     named = plan(validate(room(power=200.0)), GI, held, edits={"lights"})
-    assert named.changed == {"lights"} and named.digests is None
+    assert named.changed == {"lights"} and named.digests["lights"] is None
+    assert named.digests["geometry"] == held.digests["geometry"]
     assert "kdtree_reused" in named.stages and named.traces_photons
+
+
+def test_with_edits_named_the_camera_is_still_compared():
+    held = held_after(room(), GI)
+    assert plan(validate(moved_camera(room())), GI, held, edits=set()).changed == {"camera"}
+    assert plan(validate(room()), GI, held, edits=set()).changed == set()
+
+
+def test_a_part_named_as_edited_is_hashed_again_by_a_later_render_that_names_none():
+    held = held_after(room(), GI)
+    named = plan(validate(room(power=200.0)), GI, held, edits={"lights"})
+    later = Held(digests=named.digests, generations=named.generations, tables=named.tables)
+    assert plan(validate(room(power=200.0)), GI, later).changed == {"lights"}
+
+
+def test_the_gi_cache_is_reused_only_for_the_same_view_scene_and_cache_settings():
+    first = plan(validate(room()), GI)
+    held = Held(digests=first.digests, generations=first.generations, tables=first.tables,
+                photon_key=first.photon_key, cache_key=first.cache_key)
+    more_samples = plan(validate(room()), dataclasses.replace(GI, samples=8, clamp=3.0), held)
+    assert more_samples.cache_reused and "final_gather_reused" in more_samples.stages
+    assert "final_gather" not in more_samples.stages
+    for changed in (plan(validate(moved_camera(room())), GI, held), plan(validate(room(albedo=0.7)), GI, held),
+                    plan(validate(room()), dataclasses.replace(GI, gather_rays=64), held),
+                    plan(validate(room(power=50.0)), GI, held)):
+        assert not changed.cache_reused and "final_gather" in changed.stages
 
 
 def test_the_caustic_map_is_planned_only_with_a_specular_surface():

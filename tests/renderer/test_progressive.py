@@ -1,0 +1,75 @@
+"""Progressive refinement through one renderer: passes numbered by
+``sample_start`` average to one render of all their samples, the GI cache
+is computed once for a view and reused by every later pass, and a pass
+stopped before its upload leaves its edits for the next one."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_threads import GI, REFERENCE, scene
+
+from gpu_core.errors import RenderCancelled
+from gpu_core.renderer import Renderer
+
+
+@pytest.mark.parametrize("settings", [GI, REFERENCE], ids=["gi", "reference"])
+def test_passes_numbered_by_sample_start_average_to_one_render_of_all_samples(device, settings):
+    the_scene = scene(True, 16)
+    renderer = Renderer(device)
+    whole = renderer.render(the_scene, dataclasses.replace(settings, samples=8)).passes["Combined"]
+    passes, start = [], 0
+    for samples in (1, 1, 2, 4):
+        result = renderer.render(the_scene, dataclasses.replace(settings, samples=samples), sample_start=start)
+        passes.append((samples, result.passes["Combined"]))
+        start += samples
+    accumulated = sum(samples * image for samples, image in passes) / start
+    np.testing.assert_allclose(accumulated, whole, rtol=1e-4, atol=1e-6)
+    # and the passes are different samples, not the same ones again
+    assert not np.array_equal(passes[0][1], passes[1][1])
+
+
+def test_more_accumulated_samples_lower_the_variance_and_keep_the_mean(device):
+    the_scene = scene(False, 24)
+    renderer = Renderer(device)
+    one = dataclasses.replace(REFERENCE, samples=1)
+    images = [renderer.render(the_scene, one, sample_start=s).passes["Combined"][..., :3] for s in range(16)]
+    few, many = np.mean(images[:2], axis=0), np.mean(images, axis=0)
+    exact = np.mean([renderer.render(the_scene, one, sample_start=s).passes["Combined"][..., :3]
+                     for s in range(16, 80)] + images, axis=0)  # 80 samples: nearly the expectation
+    assert np.mean((many - exact) ** 2) < 0.5 * np.mean((few - exact) ** 2)
+    assert abs(many.mean() - exact.mean()) < 0.02 * exact.mean()
+
+
+def test_a_pass_after_the_first_reuses_the_gi_cache_and_gives_the_image_of_a_fresh_renderer(device):
+    the_scene = scene(True, 16)
+    renderer = Renderer(device)
+    first = renderer.render(the_scene, GI)
+    second = renderer.render(the_scene, GI, sample_start=GI.samples)
+    assert not first.stats["gi"]["cache_reused"] and second.stats["gi"]["cache_reused"]
+    assert "final_gather_reused" in second.stats["plan"] and "gather" not in second.stats["ms"]
+    fresh = Renderer(device).render(the_scene, GI, sample_start=GI.samples)
+    np.testing.assert_array_equal(second.passes["Combined"], fresh.passes["Combined"])
+
+
+def test_edits_of_a_render_stopped_before_its_upload_reach_the_next_render(device):
+    renderer = Renderer(device)
+    renderer.render(scene(False, 16), GI)
+    moved = scene(True, 16)  # a mirror panel added: geometry and materials
+    with pytest.raises(RenderCancelled):  # stopped at the first poll, before the upload
+        renderer.render(moved, GI, edits={"geometry", "materials"}, should_stop=lambda: True)
+    after = renderer.render(moved, GI, edits=set())
+    assert "kdtree" in after.stats["plan"]
+    np.testing.assert_array_equal(after.passes["Combined"], Renderer(device).render(moved, GI).passes["Combined"])
+
+
+def test_a_static_scene_gives_the_same_image_frame_after_frame_held_or_fresh(device):
+    # photons, cache seeds and camera paths are seeded per photon, point and
+    # pixel sample, never per frame: no flicker without an edit
+    the_scene = scene(True, 16)
+    held = Renderer(device)
+    frames = [(held if i % 2 else Renderer(device)).render(the_scene, GI).passes["Combined"] for i in range(8)]
+    for frame in frames[1:]:
+        np.testing.assert_array_equal(frame, frames[0])
