@@ -16,7 +16,8 @@ one JSON line each on standard output, the medians of ``--repeat`` runs:
 first full-resolution image), "main_thread_ms" (the sync on Blender's
 thread), "plan" (the stages of the first full-resolution render),
 "runs"}; then a line with the process's memory after ``--edits`` light
-edits in a row (each restarting the worker), against the memory after 10.
+edits in a row (each restarting the worker), against the memory after 10
+(both with the worker stopped: what stays held).
 
     python bench/viewport.py FILE.blend [--size 640x360] [--preset preview] [--repeat 3] [--edits 1000]
 
@@ -26,6 +27,7 @@ Writes bench/results/viewport_NAME.json and .txt.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import statistics
@@ -208,6 +210,8 @@ def main() -> None:
             bpy.context.view_layer.update()
             viewport.update()
             if run + 1 in (10, args.edits):
+                viewport.session.stop()  # what stays held, not what a running render holds for a while
+                gc.collect()
                 memory[run + 1] = rss_mb()
         line = {"event": "memory", "edits": args.edits, "rss_mb_after_10": round(memory.get(10, 0.0), 1),
                 f"rss_mb_after_{args.edits}": round(memory[args.edits], 1)}

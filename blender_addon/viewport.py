@@ -30,6 +30,8 @@ from .export.camera import pixel_filter, view_camera
 from .status import mode_line
 
 COARSE_FACTOR = 4
+# fewest cache points of a coarse pass
+COARSE_MIN_CACHE_POINTS = 32
 # the denoiser's guides, accumulated beside the image
 DENOISE_GUIDES = ("Denoising Albedo", "Denoising Normal")
 # most samples one accumulation pass adds (a redraw at least every such pass)
@@ -114,6 +116,19 @@ def passes(job: Job):
         done, step = done + count, min(2 * step, MAX_PASS_SAMPLES)
 
 
+def pass_settings(settings, step: Pass):
+    """The settings of one pass: its samples, never denoised by the renderer
+    (the session denoises the accumulated image), the denoiser's guides on
+    full passes when asked; a coarse pass has as many cache points per
+    pixel as the full one (a 16th of them), so it stays quick."""
+    settings = dataclasses.replace(settings, samples=step.samples, denoise=False,
+                                   denoising_passes=bool(settings.denoise) and not step.coarse)
+    if step.coarse:
+        seeds = max(COARSE_MIN_CACHE_POINTS, settings.cache_seeds // COARSE_FACTOR**2)
+        settings = dataclasses.replace(settings, cache_seeds=min(settings.cache_seeds, seeds))
+    return settings
+
+
 class Accumulation:
     """The full-resolution image of one view: the sample-weighted mean of
     its passes, denoised after the last one when asked (guided by the mean
@@ -157,9 +172,13 @@ class ViewportSession:
         self._make_renderer = make_renderer
         self._renderers: dict = {}
         self._pending: dict = {}  # device spec -> parts edited since its renderer last rendered (None: unknown)
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # the latest image
+        self._wake = threading.Condition()  # the queued job, the pending edits, the running flag
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._queued: tuple | None = None  # (job, its stop event) waiting for the worker
+        self._running = False
+        self._closed = False
         self.job: Job | None = None
         self.signature: tuple | None = None
         self._image: np.ndarray | None = None
@@ -195,22 +214,34 @@ class ViewportSession:
         return True
 
     def restart(self, job: Job) -> None:
-        """Stop the worker and start a new one on ``job``."""
-        self.stop()
-        for spec in set(self._pending) | {job.device_spec}:
-            pending = self._pending.get(spec, set())
-            self._pending[spec] = None if pending is None or job.edits is None else pending | job.edits
-        self.job = job
-        self.error = None
-        self.status = "GPU GI | rendering"
-        self.samples, self.first_plan = 0, []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._work, args=(job, self._stop), name="gpugi-viewport", daemon=True)
-        self._thread.start()
+        """Ask the running job to stop and queue ``job``; the worker starts
+        it after the stopped job's batch (Blender's thread never waits for
+        a kernel)."""
+        with self._wake:
+            self._stop.set()
+            for spec in set(self._pending) | {job.device_spec}:
+                pending = self._pending.get(spec, set())
+                self._pending[spec] = None if pending is None or job.edits is None else pending | job.edits
+            self.job = job
+            self.error = None
+            self.status = "GPU GI | rendering"
+            self.samples, self.first_plan = 0, []
+            self._stop = threading.Event()
+            self._queued = (job, self._stop)
+            self._closed = False
+            self._wake.notify()
+        if self._thread is None or not self._thread.is_alive():
+            # one worker for the session's life: OpenCL drivers keep per-thread
+            # state, so a thread per edit would grow the process edit by edit
+            self._thread = threading.Thread(target=self._worker, name="gpugi-viewport", daemon=True)
+            self._thread.start()
 
     def stop(self) -> None:
-        """Ask the worker to stop after its current batch and wait for it."""
-        self._stop.set()
+        """Stop the running job after its current batch and end the worker."""
+        with self._wake:
+            self._stop.set()
+            self._queued, self._closed = None, True
+            self._wake.notify()
         if self._thread is not None:
             self._thread.join(timeout=10.0)
         self._thread = None
@@ -222,9 +253,27 @@ class ViewportSession:
 
     @property
     def busy(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        """A job is queued or rendering."""
+        with self._wake:
+            return self._queued is not None or self._running
 
     # -- worker thread --------------------------------------------------------
+
+    def _worker(self) -> None:
+        """Run queued jobs one after the other until the session stops."""
+        while True:
+            with self._wake:
+                while self._queued is None and not self._closed:
+                    self._wake.wait()
+                if self._closed:
+                    return
+                (job, stop), self._queued = self._queued, None
+                self._running = True
+            try:
+                self._work(job, stop)
+            finally:
+                with self._wake:
+                    self._running = False
 
     def _work(self, job: Job, stop: threading.Event) -> None:
         try:
@@ -234,10 +283,11 @@ class ViewportSession:
                 if stop.is_set():
                     return
                 scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, step.factor))
-                guides = bool(job.settings.denoise) and not step.coarse
-                settings = dataclasses.replace(job.settings, samples=step.samples, denoise=False,
-                                               denoising_passes=guides)
-                edits, self._pending[job.device_spec] = self._pending.get(job.device_spec), set()
+                settings = pass_settings(job.settings, step)
+                with self._wake:
+                    if stop.is_set():
+                        return  # the edits pending stay for the next job
+                    edits, self._pending[job.device_spec] = self._pending.get(job.device_spec), set()
                 result = renderer.render(scene, settings, should_stop=stop.is_set, edits=edits,
                                          sample_start=step.start)
                 if stop.is_set():
@@ -270,8 +320,10 @@ class ViewportSession:
     def _notify(self) -> None:
         try:
             self._redraw()
-        except ReferenceError:
-            self._stop.set()  # the engine is gone; nothing will draw this
+        except ReferenceError:  # the engine is gone; nothing will draw this
+            with self._wake:
+                self._stop.set()
+                self._closed = True
 
 
 def status_line(result, label: str) -> str:

@@ -27,7 +27,7 @@ from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
 from .scene.model import Scene
 from .scene.upload import SceneBuffers, upload
-from .scene.validate import LastValidated
+from .scene.validate import GeometryMemo, validate
 from .settings import RenderSettings
 
 
@@ -50,7 +50,7 @@ class Renderer:
         self._maps: PhotonMaps | None = None
         self._cache: GiField | None = None
         self._unsynced: set[str] = set()  # parts named in edits and not uploaded yet (a render was stopped)
-        self._validate = LastValidated()
+        self._geometry = GeometryMemo()  # the last scene's checked geometry
 
     def render(self, scene: Scene, settings: RenderSettings | None = None,
                progress: Callable[[float, str], None] | None = None,
@@ -70,7 +70,7 @@ class Renderer:
             settings = replace(settings, denoising_passes=True)
         timer = StageTimer(getattr(self.device, "queue", None))
         with timer.stage("validate"):
-            scene = self._validate(scene)
+            scene = validate(scene, self._geometry)
             the_plan = plan(scene, settings, self._held, edits, self.device)
         the_plan.check_budget(self.device)
         moved = self.device.transfers()

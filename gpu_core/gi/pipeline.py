@@ -72,8 +72,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
                                     min(settings.cache_seeds, n), alpha=settings.cache_alpha, seed=settings.seed)
         check_stop(should_stop)
         with timer.stage("cut"):
-            the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
-            gather_cut = cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k)
+            the_cut, gather_cut, cut_reused = _cut(device, maps, settings)
         check_stop(should_stop)
         with timer.stage("gather"):
             gathered = gather.gather(device, buffers, chosen.pos, chosen.nrm, chosen.count,
@@ -85,7 +84,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
             irradiance, interp = interpolation.interpolate_on_device(
                 device, chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count, points.pos, points.nrm, n)
             indirect = points.scatter(irradiance)
-        stats.update(sample_points=chosen.count, cut=the_cut.stats, gather=gathered.stats,
+        stats.update(sample_points=chosen.count, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
                      outliers_clamped=outliers_clamped, interpolation={k: v for k, v in interp.items() if k != "ms"})
         check_stop(should_stop)
     if "caustics" in stages and n:
@@ -96,6 +95,18 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
     return GiField(points.grid_pos, points.grid_nrm, indirect if indirect is not None else zeros,
                    caustic if caustic is not None else zeros, points.subpixels, stats)
+
+
+def _cut(device: Device, maps: PhotonMaps, settings: RenderSettings) -> tuple:
+    """The illumination cut of the global map, the cut gathering reads
+    (caustic light added), and whether they were kept: a function of the
+    maps and two settings, computed once per photon maps for every view."""
+    key = ("cut", settings.photon_k, settings.cut_delta)
+    reused = key in maps.derived
+    if not reused:
+        the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
+        maps.derived[key] = (the_cut, cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k))
+    return (*maps.derived[key], reused)
 
 
 def programs(device: Device, settings: RenderSettings, stages: list[str], scene_defines: dict) -> list:

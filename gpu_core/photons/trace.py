@@ -40,6 +40,9 @@ class PhotonMaps:
     caustic_map: PointTree | None
     center: np.ndarray  # device coordinates are world positions minus this
     stats: dict = field(default_factory=dict)
+    # what is computed from the maps alone and kept with them: the
+    # illumination cut by (k, threshold), the same for every view (gi/cut.py)
+    derived: dict = field(default_factory=dict)
 
 
 def programs(scene_defines: dict) -> list[tuple[str, dict]]:

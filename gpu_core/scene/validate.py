@@ -4,15 +4,13 @@ make an image)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from ..errors import SceneError
 from .model import Camera, Lights, Materials, Scene, ValidationReport
 
 
-def validate(scene: Scene) -> Scene:
+def validate(scene: Scene, memo: "GeometryMemo | None" = None) -> Scene:
     """Check and repair a scene in place-free fashion; returns a new Scene.
 
     Triangles with non-finite coordinates or zero area are dropped; material
@@ -20,15 +18,16 @@ def validate(scene: Scene) -> Scene:
     corner normals are replaced by the face normal; lights with negative or
     non-finite power or position are dropped. Every repair is counted in
     ``scene.report`` and described in ``scene.warnings``. A camera that cannot
-    produce an image raises SceneError.
+    produce an image raises SceneError. ``memo`` keeps the checked geometry
+    of the last scene it saw: a scene with the very same geometry arrays
+    (callers put new arrays in a scene for what changed and never write into
+    one already rendered) is not checked again.
     """
     report = ValidationReport()
     warnings = list(scene.warnings)
     _check_camera(scene.camera)
-    tris, normals, uvs, mat_ids, cross = _valid_triangles(scene, report)
-    materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, report)
-    normals = _repaired_normals(normals, cross, report)
-    uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
+    tris, normals, uvs, mat_ids, needs_default = (memo or GeometryMemo()).geometry(scene, report)
+    materials = _with_default_material(scene.materials) if needs_default else scene.materials
     materials, repaired = _finite_materials(materials)
     report.repaired_materials = len(repaired)
     if repaired:
@@ -40,9 +39,41 @@ def validate(scene: Scene) -> Scene:
         warnings.append("world colour was negative or not finite; used black")
         world = np.zeros(3, np.float32)
     report.messages = warnings
-    return Scene(triangles=tris, normals=normals.astype(np.float32), uvs=uvs, material_ids=mat_ids.astype(np.int32),
+    return Scene(triangles=tris, normals=normals, uvs=uvs, material_ids=mat_ids,
                  materials=materials, lights=lights, camera=scene.camera, world_color=world,
                  textures=list(scene.textures), warnings=warnings, report=report)
+
+
+_GEOMETRY_COUNTS = ("dropped_nonfinite_triangles", "dropped_degenerate_triangles", "repaired_material_ids",
+                    "repaired_normals")
+
+
+class GeometryMemo:
+    """The checked geometry of the last scene validated with it, and the
+    repairs counted, keyed by its arrays (by identity) and material count."""
+
+    def __init__(self):
+        self._key: tuple = ()
+        self._result: tuple = ()
+
+    def geometry(self, scene: Scene, report: ValidationReport) -> tuple:
+        """(triangles, normals, uvs, material ids, whether a default
+        material is needed) of ``scene``, its repairs counted in ``report``."""
+        key = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, len(scene.materials))
+        if not (len(key) == len(self._key) and all(a is b for a, b in zip(key[:4], self._key[:4]))
+                and key[4] == self._key[4]):
+            counted = ValidationReport()
+            tris, normals, uvs, mat_ids, cross = _valid_triangles(scene, counted)
+            materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, counted)
+            normals = _repaired_normals(normals, cross, counted).astype(np.float32)
+            uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
+            counts = {name: getattr(counted, name) for name in _GEOMETRY_COUNTS}
+            self._key = key
+            self._result = (tris, normals, uvs, mat_ids.astype(np.int32), materials is not scene.materials, counts)
+        *geometry, counts = self._result
+        for name, value in counts.items():
+            setattr(report, name, value)
+        return tuple(geometry)
 
 
 def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
@@ -182,24 +213,3 @@ def _check_camera(camera: Camera) -> None:
 
 
 
-
-class LastValidated:
-    """``validate`` that remembers its last scene: a scene holding the very
-    same arrays and tables (a camera aside) is not checked again, only its
-    camera. Callers put new arrays in a scene for what changed and never
-    write into one already rendered (the viewport's passes share them)."""
-
-    def __init__(self):
-        self._inputs: tuple = ()
-        self._scene: Scene | None = None
-
-    def __call__(self, scene: Scene) -> Scene:
-        inputs = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.materials, scene.lights,
-                  scene.world_color, scene.warnings, *scene.textures)
-        if self._scene is not None and len(inputs) == len(self._inputs) and all(
-                a is b for a, b in zip(inputs, self._inputs)):
-            _check_camera(scene.camera)
-            return replace(self._scene, camera=scene.camera)
-        validated = validate(scene)
-        self._inputs, self._scene = inputs, validated
-        return validated

@@ -5,6 +5,7 @@ that the result is the scene (and the image) of a fresh export."""
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -190,7 +191,9 @@ def test_bad_input_mid_session_shows_in_the_status_and_the_next_good_edit_render
     def sync_and_render(updates):
         scene, changed = sync.export(bpy.context.evaluated_depsgraph_get(), camera, updates)
         session.update_scene(Job(scene, dataclasses.replace(GI, samples=2), None, edits=changed), ("view",))
-        session._thread.join(60)
+        deadline = time.time() + 60
+        while session.busy and time.time() < deadline:
+            time.sleep(0.01)
         return session.status
 
     sync_and_render(None)

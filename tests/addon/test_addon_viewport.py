@@ -159,8 +159,10 @@ class FakeRenderer:
     """Records each render; ``block`` makes a render wait until it is asked
     to stop. The image of the n-th render is n everywhere."""
 
-    def __init__(self, block=False, error=None):
+    def __init__(self, block=False, error=None, linger=0.0):
         self.calls: list[tuple[int, int, int]] = []
+        self.linger = linger  # seconds a render takes to end, cancelled or not
+        self.active = self.most_at_once = 0
         self.starts: list[int] = []
         self.edits: list = []
         self.denoised: list[bool] = []
@@ -179,10 +181,16 @@ class FakeRenderer:
         self.started.set()
         if self.error is not None:
             raise self.error
-        while self.block:
-            if should_stop():
-                raise RenderCancelled("render cancelled")
-            time.sleep(0.005)
+        self.active += 1
+        self.most_at_once = max(self.most_at_once, self.active)
+        try:
+            while self.block:
+                if should_stop():
+                    raise RenderCancelled("render cancelled")
+                time.sleep(0.005)
+            time.sleep(self.linger)
+        finally:
+            self.active -= 1
         image = np.full((cam.height, cam.width, 4), float(len(self.calls)), np.float32)
         passes = {"Combined": image}
         if settings.denoising_passes:
@@ -295,17 +303,16 @@ def test_same_view_does_not_restart_and_a_new_view_does():
     assert renderer.calls[-1][:2] == (40, 20) and session.samples == 8
 
 
-def test_an_edit_stops_the_running_render_between_batches():
-    renderer = FakeRenderer(block=True)
+def test_an_edit_stops_the_running_render_without_waiting_and_the_next_job_waits_for_it():
+    renderer = FakeRenderer(block=True, linger=0.5)
     session, _ = _session(renderer)
     session.update_scene(_job(), signature=("view", 1))
     assert renderer.started.wait(5)
-    first_thread = session._thread
-    renderer.block = False
-    renderer.started.clear()
     session.update_scene(_job(width=16, height=16), signature=("view", 2))
-    assert not first_thread.is_alive()
+    assert renderer.active == 1  # Blender's thread did not wait for the stopped render's batch
+    renderer.block = False
     _wait(session)
+    assert renderer.most_at_once == 1  # never two renders at once
     assert renderer.calls[-1][:2] == (16, 16) and session.samples == 8
     assert session.error is None
 
@@ -343,6 +350,22 @@ def test_a_gone_engine_stops_the_worker_quietly():
     _wait(session)
     assert len(renderer.calls) == 1  # the full pass never started
     assert session.error is None
+    session._thread.join(5)
+    assert not session._thread.is_alive()  # and the worker ended
+
+
+def test_one_worker_thread_serves_every_edit_of_a_session():
+    renderer = FakeRenderer()
+    session, _ = _session(renderer)
+    workers = set()
+    for width in range(20, 30):
+        session.update_scene(_job(width=width), signature=("view", width))
+        workers.add(session._thread)
+    _wait(session)
+    assert len(workers) == 1 and renderer.calls[-1][0] == 29
+    worker = session._thread
+    session.stop()
+    assert not worker.is_alive()
 
 
 # -- the engine's viewport callbacks, with a stand-in for Blender's engine struct ---------

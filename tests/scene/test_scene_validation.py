@@ -1,10 +1,13 @@
 """gpu_core.scene.validate: every bad input is dropped or repaired, counted and described."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scenes_py import camera_looking_down, make_scene, quad
 
 from gpu_core.errors import SceneError
+from gpu_core.scene.validate import GeometryMemo
 from gpu_core.scene import (
     AREA_RECTANGLE,
     CAMERA_ORTHO,
@@ -306,3 +309,25 @@ def test_clean_scene_passes_with_no_repairs_and_no_warnings():
     np.testing.assert_array_equal(out.triangles, scene.triangles)
     np.testing.assert_allclose(out.normals, scene.normals, atol=1e-6)
     assert out.lights.names == ["lamp"]
+
+
+# -- the geometry memo (the viewport's passes share a scene's arrays) ---------------
+
+
+def test_a_scene_with_the_same_geometry_arrays_is_not_checked_again_but_its_repairs_still_count():
+    tris = np.concatenate([quad((0, 0, 0), 1.0), quad((2, 0, 0), 1.0)])
+    tris[0, 0, 0] = np.nan
+    first = _scene(tris, ids=[0, 5, 0, 0], lights=Lights.make([dict(kind=LIGHT_POINT, power=(10,) * 3)]))
+    memo = GeometryMemo()
+    checked = validate(first, memo)
+    brighter = dataclasses.replace(first, lights=Lights.make([dict(kind=LIGHT_POINT, power=(20,) * 3)]),
+                                   materials=Materials.make([{"base_color": (0.1, 0.2, 0.3)}]))
+    again = validate(brighter, memo)
+    assert again.triangles is checked.triangles and again.normals is checked.normals  # not checked again
+    assert again.report.as_stats() == checked.report.as_stats()  # 1 NaN triangle dropped, 1 id repaired
+    assert again.report.dropped_nonfinite_triangles == 1 and again.report.repaired_material_ids == 1
+    assert again.lights.power[0, 0] == 20 and again.materials.base_color[0, 0] == np.float32(0.1)
+    assert again.materials.names[-1] == "gpugi-default"
+    moved = dataclasses.replace(first, triangles=first.triangles + 1.0)
+    assert validate(moved, memo).triangles is not checked.triangles  # new arrays: checked again
+    np.testing.assert_array_equal(validate(moved, memo).triangles, checked.triangles + 1.0)
