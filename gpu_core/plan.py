@@ -46,6 +46,7 @@ class Held:
     tables: SceneTables | None = None
     photon_key: tuple | None = None
     cache_key: tuple | None = None
+    records_keys: tuple = ()  # of the cache records held (views of a lit scene)
 
 
 @dataclass
@@ -64,6 +65,8 @@ class Plan:
     photon_key: tuple | None  # of the maps this render uses
     cache_reused: bool  # the GI cache held (same view, scene and settings) is used again
     cache_key: tuple | None  # of the GI cache this render uses
+    records_reused: bool  # cache records of an earlier view of the same lit scene are kept
+    records_key: tuple | None  # of the cache records this render reads and leaves
     scene_defines: dict  # program features of every kernel that reads the scene
     image_defines: dict  # the image kernel's, scene features included
     programs: list[tuple[str, dict]]  # every program the render builds
@@ -124,7 +127,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if "light_passes" in stages:
         image_defines["IMAGE_LIGHT_PASSES"] = 1
     emitters, maps, photon_key, reuse, reused = [], {}, None, {}, False
-    cache_key, cache_reused = None, False
+    cache_key, cache_reused, records_key, records_reused = None, False, None, False
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1
         emitters = emitter_powers(scene, tables)
@@ -139,7 +142,12 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         cache_reused = cache_key == held.cache_key
         if cache_reused:
             reuse["gi_cache"] = "neither the view, the scene nor the GI settings changed"
-        stages += _gi_stages(maps, reused, cache_reused)
+        # records hold for every view of the lit scene: the cache key but the camera and grid
+        records_key = photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS if k != "gi_subpixels")
+        records_reused = settings.cache_reuse and not cache_reused and records_key in held.records_keys
+        if records_reused:
+            reuse["cache_records"] = "only the view changed: records in world space are kept"
+        stages += _gi_stages(maps, reused, cache_reused, records_reused)
     if settings.denoise:
         stages.append("denoise")
     if "geometry" not in changed:
@@ -147,7 +155,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
         emitters=emitters, photon_maps=maps, photons_reused=reused, photon_key=photon_key, cache_reused=cache_reused,
-        cache_key=cache_key, scene_defines=scene_defines,
+        cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
         image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
     the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
     if device is not None and hasattr(device, "device"):
@@ -175,20 +183,22 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
     return features
 
 
-def _gi_stages(maps: dict[str, str], photons_reused: bool, cache_reused: bool) -> list[str]:
+def _gi_stages(maps: dict[str, str], photons_reused: bool, cache_reused: bool, records_reused: bool) -> list[str]:
     """The GI stages: the photon maps traced (or reused), then the cache
-    stages where there is light, and caustics where there is a caustic map
+    stages where there is light (cache points and gathering only where the
+    records kept leave gaps), and caustics where there is a caustic map
     (each "_reused" when the cache held is used again)."""
     stages = [f"{name}_photons" + ("_reused" if photons_reused else "") for name in ("global", "caustic")
               if maps[name].startswith("built")]
     cache = []
     if maps["global"].startswith("built"):
-        cache += ["shading_points", "sample_points", "illumination_cut", "final_gather", "interpolation"]
+        cache += ["shading_points", *(["cache_records_reused"] if records_reused else []), "sample_points",
+                  "illumination_cut", "final_gather", "interpolation"]
     elif maps["caustic"].startswith("built"):
         cache.append("shading_points")
     if maps["caustic"].startswith("built"):
         cache.append("caustics")
-    return stages + [stage + ("_reused" if cache_reused else "") for stage in cache]
+    return stages + [stage + ("_reused" if cache_reused and not stage.endswith("_reused") else "") for stage in cache]
 
 
 # device bytes per item, generous estimates (the kd-tree's own arrays vary with the scene)

@@ -22,6 +22,9 @@ from .device import Device
 from .device.timer import StageTimer
 from .errors import GpuGiError, check_stop
 from .gi.pipeline import GiField, render_gi
+
+# most cache records held for later views, in units of the Cache Points setting
+RECORDS_CAP = 4
 from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
@@ -49,6 +52,7 @@ class Renderer:
         self._buffers: SceneBuffers | None = None
         self._maps: PhotonMaps | None = None
         self._cache: GiField | None = None
+        self._records: dict = {}  # records key -> CacheRecords, the most recent last
         self._unsynced: set[str] = set()  # parts named in edits and not uploaded yet (a render was stopped)
         self._geometry = GeometryMemo()  # the last scene's checked geometry
 
@@ -133,10 +137,24 @@ class Renderer:
         if the_plan.cache_reused and self._cache is not None:
             return self._cache
         self._held.cache_key, self._cache = None, None
-        field_ = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
-                           the_plan.stages, the_plan.scene_defines, timer, should_stop)
+        records = self._records.get(the_plan.records_key) if the_plan.records_reused else None
+        field_, records = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
+                                    the_plan.stages, the_plan.scene_defines, timer, should_stop, records)
         self._held.cache_key, self._cache = the_plan.cache_key, field_
+        self._keep_records(the_plan.records_key, records, settings)
         return field_
+
+    def _keep_records(self, key: tuple, records, settings: RenderSettings) -> None:
+        """Hold the view's cache records for later views of the lit scene:
+        those of the two latest keys (a coarse and a full pass), while they
+        number at most RECORDS_CAP cache points' worth (then the next view
+        starts afresh)."""
+        self._records.pop(key, None)
+        if records is not None and settings.cache_reuse and records.count <= RECORDS_CAP * settings.cache_seeds:
+            self._records[key] = records
+        while len(self._records) > 2:
+            self._records.pop(next(iter(self._records)))
+        self._held.records_keys = tuple(self._records)
 
     # -- report --------------------------------------------------------------------
 

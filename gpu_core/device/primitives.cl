@@ -120,6 +120,19 @@ __kernel void Prim_gather_float4(const __global float4 *values, const __global i
     if (i < n) out[i] = values[index[i]];
 }
 
+/* out[index[i]] = values[i] for float4 rows. */
+__kernel void Prim_scatter_float4(const __global float4 *values, const __global int *index, const int n,
+                                  __global float4 *out) {
+    int i = get_global_id(0);
+    if (i < n) out[index[i]] = values[i];
+}
+
+/* out[i] = values[index[i]] for ints. */
+__kernel void Prim_gather_int(const __global int *values, const __global int *index, const int n, __global int *out) {
+    int i = get_global_id(0);
+    if (i < n) out[i] = values[index[i]];
+}
+
 /* Each point with its index in w (int bits), as the point-tree builder takes them. */
 __kernel void Prim_indexed_points(const __global float4 *points, const int n, __global float4 *out) {
     int i = get_global_id(0);

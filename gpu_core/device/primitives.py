@@ -152,6 +152,29 @@ def gather_rows(device: Device, values: cl.Buffer, index: cl.Buffer, n: int) -> 
     return out
 
 
+def gather_ints(device: Device, values: cl.Buffer, index: cl.Buffer, n: int) -> cl.Buffer:
+    """A new buffer of the ints ``values[index[i]]``, i < n."""
+    out = device.empty(4 * max(n, 1))
+    _k(device, "Prim_gather_int")(n, values, index, np.int32(n), out)
+    return out
+
+
+def scatter_rows(device: Device, values: cl.Buffer, index: cl.Buffer, n: int, out: cl.Buffer) -> None:
+    """``out[index[i]] = values[i]`` for the float4 rows i < n."""
+    _k(device, "Prim_scatter_float4")(n, values, index, np.int32(n), out)
+
+
+def concatenated(device: Device, parts: list[tuple[cl.Buffer, int]], row_bytes: int) -> cl.Buffer:
+    """A new buffer of the first ``count`` rows of each (buffer, count), in order."""
+    out = device.empty(row_bytes * max(sum(count for _, count in parts), 1))
+    offset = 0
+    for buffer, count in parts:
+        if count:
+            cl.enqueue_copy(device.queue, out, buffer, dst_offset=offset, byte_count=row_bytes * count)
+        offset += row_bytes * count
+    return out
+
+
 def indexed_points(device: Device, points: cl.Buffer, n: int) -> cla.Array:
     """(n, 4) float32 device array of the float4 ``points`` with each one's
     index in w (int bits), as the point-tree builder takes them."""

@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-from ..device import Device
+from ..device import Device, primitives
 from ..accel.point_tree import query_programs
 from ..device.timer import StageTimer
 from ..errors import check_stop
@@ -30,6 +30,10 @@ from ..scene.upload import SceneBuffers
 from ..settings import RenderSettings
 from . import cut, gather, shading_points
 from .cache import interpolation, outliers, samples
+
+
+# gather streams set aside per record: new records of a later view draw the streams after the kept ones'
+_STREAMS = 7919
 
 
 @dataclass
@@ -53,12 +57,28 @@ def strata(rays: int) -> int:
     return max(1, int(round(np.sqrt(max(int(rays), 1)))))
 
 
+@dataclass
+class CacheRecords:
+    """Gathered irradiance records in world space (the scene's device
+    frame): what a later view of the same lit scene can interpolate from."""
+
+    pos: cl.Buffer  # float4 per record
+    nrm: cl.Buffer  # float4 per record, unit
+    e: cl.Buffer  # float4 per record: irradiance (outliers clamped)
+    r: cl.Buffer  # float per record: harmonic mean distance R_j
+    count: int
+
+
 def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, int], settings: RenderSettings,
               maps: PhotonMaps, stages: list[str], scene_defines: dict, timer: StageTimer,
-              should_stop: Callable[[], bool] | None = None) -> GiField:
-    """The GI field of the pixels in ``window`` for a scene on the device;
-    ``stages`` (the plan) says which cache stages run. ``should_stop`` is
-    polled between the stages and between gather batches (RenderCancelled)."""
+              should_stop: Callable[[], bool] | None = None,
+              records: CacheRecords | None = None) -> tuple[GiField, CacheRecords | None]:
+    """The GI field of the pixels in ``window`` for a scene on the device,
+    and the cache records it was interpolated from; ``stages`` (the plan)
+    says which cache stages run. ``records`` (of an earlier view of the
+    same lit scene) are kept: only the shading points they do not cover
+    get new cache points and gathering. ``should_stop`` is polled between
+    the stages and between gather batches (RenderCancelled)."""
     stats: dict = {"photons": maps.stats}
     with timer.stage("shading_points"):
         points = shading_points.trace(device, buffers, window, settings.max_bounces, settings.gi_subpixels,
@@ -67,25 +87,9 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     check_stop(should_stop)
     indirect = caustic = None
     if "final_gather" in stages and n:
-        with timer.stage("sample_points"):
-            chosen = samples.select(device, points.pos, points.nrm, points.pixel, n, points.width, points.height,
-                                    min(settings.cache_seeds, n), alpha=settings.cache_alpha, seed=settings.seed)
-        check_stop(should_stop)
-        with timer.stage("cut"):
-            the_cut, gather_cut, cut_reused = _cut(device, maps, settings)
-        check_stop(should_stop)
-        with timer.stage("gather"):
-            gathered = gather.gather(device, buffers, chosen.pos, chosen.nrm, chosen.count,
-                                     strata(settings.gather_rays), gather_cut, settings.seed, settings.max_bounces,
-                                     scene_defines, should_stop)
-        check_stop(should_stop)
-        with timer.stage("interpolate"):
-            clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
-            irradiance, interp = interpolation.interpolate_on_device(
-                device, chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count, points.pos, points.nrm, n)
-            indirect = points.scatter(irradiance)
-        stats.update(sample_points=chosen.count, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
-                     outliers_clamped=outliers_clamped, interpolation={k: v for k, v in interp.items() if k != "ms"})
+        irradiance, records = _cached_irradiance(device, buffers, points, settings, maps, scene_defines, timer,
+                                                 should_stop, records, stats)
+        indirect = points.scatter(irradiance)
         check_stop(should_stop)
     if "caustics" in stages and n:
         with timer.stage("caustics"):
@@ -93,8 +97,74 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
             maps.caustic_map.irradiance_on_device(points.pos, points.nrm, n, settings.photon_k, estimate)
             caustic = points.scatter(estimate)
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
-    return GiField(points.grid_pos, points.grid_nrm, indirect if indirect is not None else zeros,
-                   caustic if caustic is not None else zeros, points.subpixels, stats)
+    field_ = GiField(points.grid_pos, points.grid_nrm, indirect if indirect is not None else zeros,
+                     caustic if caustic is not None else zeros, points.subpixels, stats)
+    return field_, records
+
+
+def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: RenderSettings, maps: PhotonMaps,
+                       scene_defines: dict, timer: StageTimer, should_stop, records: CacheRecords | None,
+                       stats: dict) -> tuple[cl.Buffer, CacheRecords]:
+    """Indirect irradiance (float4 per shading point) and the records it
+    comes from: cache points chosen among the points ``records`` leave
+    uncovered (all of them without records), gathered, clamped, and
+    interpolated together with the records kept."""
+    n = points.count
+    prior = index = None
+    todo, kept = points, 0
+    if records is not None and records.count:
+        with timer.stage("coverage"):
+            flag = device.empty(4 * n)
+            prior, _ = interpolation.interpolate_on_device(device, records.pos, records.nrm, records.e, records.r,
+                                                           records.count, points.pos, points.nrm, n, flag=flag)
+            index, left = interpolation.uncovered(device, flag, n)
+            todo, kept = shading_points.subset(points, index, left), records.count
+        check_stop(should_stop)
+    new = None
+    if todo.count:
+        seeds = settings.cache_seeds if index is None else max(1, round(settings.cache_seeds * todo.count / n))
+        with timer.stage("sample_points"):
+            chosen = samples.select(device, todo.pos, todo.nrm, todo.pixel, todo.count, todo.width, todo.height,
+                                    min(seeds, todo.count), alpha=settings.cache_alpha, seed=settings.seed)
+        check_stop(should_stop)
+        with timer.stage("cut"):
+            the_cut, gather_cut, cut_reused = _cut(device, maps, settings)
+        check_stop(should_stop)
+        with timer.stage("gather"):
+            # the streams of new records go on from the kept ones' (no repeated noise)
+            gathered = gather.gather(device, buffers, chosen.pos, chosen.nrm, chosen.count,
+                                     strata(settings.gather_rays), gather_cut, settings.seed + _STREAMS * kept,
+                                     settings.max_bounces, scene_defines, should_stop)
+        check_stop(should_stop)
+        with timer.stage("interpolate"):
+            clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
+        new = CacheRecords(chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count)
+        stats.update(sample_points=chosen.count, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
+                     outliers_clamped=outliers_clamped)
+    merged = _merged(device, records if kept else None, new)
+    stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}
+    with timer.stage("interpolate"):
+        if index is None:
+            irradiance, interp = interpolation.interpolate_on_device(
+                device, merged.pos, merged.nrm, merged.e, merged.r, merged.count, points.pos, points.nrm, n)
+        else:  # covered points keep the records' value; the others are interpolated from all records
+            irradiance, interp = prior, {}
+            if todo.count:
+                filled, interp = interpolation.interpolate_on_device(
+                    device, merged.pos, merged.nrm, merged.e, merged.r, merged.count, todo.pos, todo.nrm, todo.count)
+                primitives.scatter_rows(device, filled, index, todo.count, irradiance)
+    stats["interpolation"] = {k: v for k, v in interp.items() if k != "ms"}
+    return irradiance, merged
+
+
+def _merged(device: Device, kept: CacheRecords | None, new: CacheRecords | None) -> CacheRecords:
+    """The records kept followed by the new ones."""
+    if kept is None or new is None:
+        return kept or new
+    parts = [(kept, kept.count), (new, new.count)]
+    return CacheRecords(*(primitives.concatenated(device, [(getattr(r, name), c) for r, c in parts], size)
+                          for name, size in (("pos", 16), ("nrm", 16), ("e", 16), ("r", 4))),
+                        kept.count + new.count)
 
 
 def _cut(device: Device, maps: PhotonMaps, settings: RenderSettings) -> tuple:

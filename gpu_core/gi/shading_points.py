@@ -55,6 +55,19 @@ class ShadingPoints(DevicePoints):
         return grid
 
 
+def subset(points: ShadingPoints, index: cl.Buffer, count: int) -> ShadingPoints:
+    """The points ``index`` (int per point, ``count`` of them) of ``points``,
+    on the same grid (their slots and pixels kept)."""
+    device = points.device
+    slot = primitives.gather_ints(device, points.slot, index, count)
+    pixel = device.empty(8 * max(count, 1))
+    device.kernel(_PROGRAM, "ShadingPoints_pixels")(count, slot, np.int32(count), np.int32(points.width),
+                                                    np.int32(points.subpixels**2), pixel)
+    return ShadingPoints(device, points.grid_pos, points.grid_nrm, primitives.gather_rows(device, points.pos, index, count),
+                         primitives.gather_rows(device, points.nrm, index, count), pixel, slot, count, points.width,
+                         points.height, points.subpixels)
+
+
 def trace(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, int], max_bounces: int,
           subpixels: int = 2, scene_defines: dict | None = None) -> ShadingPoints:
     """Shading points of the pixels in ``window`` = (x0, y0, x1, y1) of the

@@ -9,14 +9,16 @@ import itertools
 
 import numpy as np
 import pytest
-from test_threads import GI, scene
+from test_threads import GI as GI_REUSING, scene
 
 from gpu_core.errors import RenderCancelled
 from gpu_core.gi import gather
 from gpu_core.renderer import Renderer
 
 # GI with another cache setting: alternating the two, every render runs the
-# GI cache stages again (a render with the same settings would reuse them)
+# GI cache stages again (a render with the same settings would reuse them,
+# and one of the same lit scene would keep the records of the last view)
+GI = dataclasses.replace(GI_REUSING, cache_reuse=False)
 OTHER = dataclasses.replace(GI, cache_alpha=GI.cache_alpha + 0.1)
 
 
@@ -47,3 +49,20 @@ def test_stopping_at_any_poll_cancels_and_the_next_render_is_unchanged(device):
         with pytest.raises(RenderCancelled):
             renderer.render(the_scene, OTHER, should_stop=lambda: next(calls) >= stop_at)
         np.testing.assert_array_equal(renderer.render(the_scene, GI).passes["Combined"], expected)
+
+
+def test_stopping_a_view_that_keeps_the_records_of_the_last_one_leaves_the_next_render_unchanged(device):
+    first, moved = scene(True, 20), scene(True, 20)
+    moved.camera.matrix[0, 3] += 0.2
+    fresh = Renderer(device)
+    fresh.render(first, GI_REUSING)
+    expected = fresh.render(moved, GI_REUSING)
+    assert "cache_records_reused" in expected.stats["plan"]
+    for stop_at in range(6):
+        renderer = Renderer(device)
+        renderer.render(first, GI_REUSING)
+        calls = itertools.count()
+        with pytest.raises(RenderCancelled):
+            renderer.render(moved, GI_REUSING, should_stop=lambda: next(calls) >= stop_at)
+        np.testing.assert_array_equal(renderer.render(moved, GI_REUSING).passes["Combined"],
+                                      expected.passes["Combined"])

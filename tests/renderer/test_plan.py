@@ -133,3 +133,14 @@ def test_gi_memory_counts_in_the_budget_before_any_kernel_runs():
     reference.check_budget(device)
     with pytest.raises(BudgetError, match="small device"):
         gi.check_budget(device)
+
+
+def test_cache_records_are_kept_for_a_new_view_of_the_same_lit_scene_only():
+    first = plan(validate(room()), GI)
+    held = Held(digests=first.digests, generations=first.generations, tables=first.tables,
+                photon_key=first.photon_key, cache_key=first.cache_key, records_keys=(first.records_key,))
+    turned = plan(validate(moved_camera(room())), GI, held)
+    assert turned.records_reused and "cache_records_reused" in turned.stages and "final_gather" in turned.stages
+    assert not plan(validate(room(power=50.0)), GI, held).records_reused
+    assert not plan(validate(moved_camera(room())), dataclasses.replace(GI, cache_reuse=False), held).records_reused
+    assert not plan(validate(room()), GI, held).records_reused  # the same view reuses the whole cache instead

@@ -179,3 +179,9 @@ __kernel void Cache_flag_one_hot(const __global int *flag, const int n, __global
     int i = get_global_id(0);
     if (i < n) out[i] = (int4)(flag[i] == 0, flag[i] == 1, flag[i] == 2, flag[i] == 3);
 }
+
+/* 1 where a point is not covered by any sample (flag other than 1). */
+__kernel void Cache_uncovered(const __global int *flag, const int n, __global int *out) {
+    int i = get_global_id(0);
+    if (i < n) out[i] = flag[i] != 1;
+}

@@ -42,20 +42,24 @@ def _k(device: Device, name: str):
 
 def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr: cl.Buffer, srad: cl.Buffer,
                           m: int, pos: cl.Buffer, nrm: cl.Buffer, n: int, a: float = COVER,
-                          behind: float = BEHIND) -> tuple[cl.Buffer, dict]:
+                          behind: float = BEHIND, flag: cl.Buffer | None = None) -> tuple[cl.Buffer, dict]:
     """Irradiance (float4 per point, on the device) at the ``n`` points
     ``pos`` (float4) with unit normals ``nrm`` from the ``m`` samples
     (float4 positions, unit normals and irradiance, float harmonic-mean
     distances R_j), and stats: ``covered`` (fraction of points with at
     least one accepted sample), ``fallback`` (points given their nearest
     sample's value), ``fallback_any_normal`` (of those, points with no
-    sample facing their way), ``ms``."""
+    sample facing their way), ``ms``. ``flag`` (int per point), when given,
+    receives 1 where a point is covered, 2 or 3 where it took a nearest
+    sample's value, 0 where there are no samples."""
     if not (np.isfinite(a) and a > 0.0 and np.isfinite(behind) and behind >= 0.0):
         raise ValueError(f"a must be > 0 and behind >= 0 (finite), not {a}, {behind}")
     timer = StageTimer(device.queue)
     stats = {"points": n, "samples": m, "ms": timer.ms}
     out = device.zeros(16 * n)
     if n == 0 or m == 0:
+        if flag is not None and n:
+            cl.enqueue_fill_buffer(device.queue, flag, np.int32(0), 0, 4 * n)
         stats.update(covered=0.0, fallback=0, fallback_any_normal=0)
         return out, stats
     with timer.stage("build"):
@@ -78,7 +82,7 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
         lo, hi = primitives.bounds(device, d_spos, m)
         grid = cache_grid.build(device, d_spos, m, lo[:3], hi[:3], m)
     with timer.stage("interpolate"):
-        flag = device.empty(4 * n)
+        flag = device.empty(4 * n) if flag is None else flag
         _k(device, "Cache_interpolate")(
             n, d_pos, nrm, np.int32(n), d_spos, snrm, sirr, d_srad, cells, buckets.start, buckets.end, buckets.order,
             np.uint32(table - 1), np.uint32(level_bits), *grid.kernel_args(), np.int32(m), np.float32(behind), out,
@@ -87,6 +91,14 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
     stats.update(covered=float(kinds[1]) / n, fallback=int(kinds[2] + kinds[3]), fallback_any_normal=int(kinds[3]))
     stats["ms"]["total"] = timer.ms["build"] + timer.ms["interpolate"]
     return out, stats
+
+
+def uncovered(device: Device, flag: cl.Buffer, n: int) -> tuple[cl.Buffer, int]:
+    """The indices of the points ``interpolate_on_device`` flagged as not
+    covered by any sample, and how many."""
+    flags = device.empty(4 * max(n, 1))
+    _k(device, "Cache_uncovered")(n, flag, np.int32(n), flags)
+    return primitives.compact(device, flags, n)
 
 
 def _flag_counts(device: Device, flag: cl.Buffer, n: int) -> np.ndarray:
