@@ -88,7 +88,7 @@ def main() -> None:
 
     Renderer(device).render(exported, gi)  # programs built before anything is timed
     static = [Renderer(device).render(exported, gi).passes["Combined"][..., :3] for _ in range(args.frames)]
-    static_std = float(np.std(static, axis=0).max())
+    static_std = float(np.std(np.asarray(static, np.float64), axis=0).max())
 
     views = [dataclasses.replace(exported, camera=orbit(exported.camera, i * args.step, center))
              for i in range(args.frames)]

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+import time
 from typing import Callable
 
 import numpy as np
@@ -34,6 +35,8 @@ COARSE_FACTOR = 4
 COARSE_MIN_CACHE_POINTS = 32
 # the denoiser's guides, accumulated beside the image
 DENOISE_GUIDES = ("Denoising Albedo", "Denoising Normal")
+# shortest time between two status-line redraws during a pass
+STATUS_SECONDS = 0.1
 # most samples one accumulation pass adds (a redraw at least every such pass)
 MAX_PASS_SAMPLES = 16
 
@@ -288,8 +291,8 @@ class ViewportSession:
                     if stop.is_set():
                         return  # the edits pending stay for the next job
                     edits, self._pending[job.device_spec] = self._pending.get(job.device_spec), set()
-                result = renderer.render(scene, settings, should_stop=stop.is_set, edits=edits,
-                                         sample_start=step.start)
+                result = renderer.render(scene, settings, progress=self._progress(step, film, stop),
+                                         should_stop=stop.is_set, edits=edits, sample_start=step.start)
                 if stop.is_set():
                     return
                 image, label = film.add(step, result.passes)
@@ -306,6 +309,22 @@ class ViewportSession:
             self._fail(str(err))
         except Exception as err:  # a worker must never take Blender down
             self._fail(f"internal error ({type(err).__name__}): {err}")
+
+    def _progress(self, step: Pass, film: "Accumulation", stop: threading.Event):
+        """The renderer's progress as the status line ("gathering", "sample 3/32:
+        rendered 4096/230400 pixels"), redrawn at most every STATUS_SECONDS."""
+        label = "preview" if step.coarse else f"sample {film.samples + step.samples}" + (
+            f"/{film.target}" if film.target > 0 else "")
+        shown = [0.0]
+
+        def progress(_fraction: float, message: str) -> None:
+            now = time.perf_counter()
+            if stop.is_set() or now - shown[0] < STATUS_SECONDS:
+                return
+            shown[0] = now
+            self.status = f"GPU GI | {label}: {message}"
+            self._notify()
+        return progress
 
     def _renderer(self, device_spec):
         if device_spec not in self._renderers:

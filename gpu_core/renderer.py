@@ -85,12 +85,13 @@ class Renderer:
         check_stop(should_stop)
         field_ = None
         if settings.mode == "gi":
-            if progress is not None:
-                progress(0.0, "global illumination")
+            say = (lambda text: progress(0.0, text)) if progress is not None else None
+            if say is not None and the_plan.traces_photons:
+                say("photons")
             with timer.stage("photons"):
                 maps = self._photon_maps(the_plan, settings)
             check_stop(should_stop)
-            field_ = self._gi_cache(scene, settings, the_plan, maps, timer, should_stop)
+            field_ = self._gi_cache(scene, settings, the_plan, maps, timer, should_stop, say)
             check_stop(should_stop)
         with timer.stage("render"):
             passes, batches = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
@@ -131,7 +132,7 @@ class Renderer:
         return self._maps
 
     def _gi_cache(self, scene: Scene, settings: RenderSettings, the_plan: Plan, maps: PhotonMaps,
-                  timer: StageTimer, should_stop) -> GiField:
+                  timer: StageTimer, should_stop, say) -> GiField:
         """The GI cache of this view: computed by the GI stages, or the one
         held when the plan says it is reused (only the image runs again)."""
         if the_plan.cache_reused and self._cache is not None:
@@ -139,7 +140,7 @@ class Renderer:
         self._held.cache_key, self._cache = None, None
         records = self._records.get(the_plan.records_key) if the_plan.records_reused else None
         field_, records = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
-                                    the_plan.stages, the_plan.scene_defines, timer, should_stop, records)
+                                    the_plan.stages, the_plan.scene_defines, timer, should_stop, records, say)
         self._held.cache_key, self._cache = the_plan.cache_key, field_
         self._keep_records(the_plan.records_key, records, settings)
         return field_

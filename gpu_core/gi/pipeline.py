@@ -71,15 +71,18 @@ class CacheRecords:
 
 def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, int], settings: RenderSettings,
               maps: PhotonMaps, stages: list[str], scene_defines: dict, timer: StageTimer,
-              should_stop: Callable[[], bool] | None = None,
-              records: CacheRecords | None = None) -> tuple[GiField, CacheRecords | None]:
+              should_stop: Callable[[], bool] | None = None, records: CacheRecords | None = None,
+              say: Callable[[str], None] | None = None) -> tuple[GiField, CacheRecords | None]:
     """The GI field of the pixels in ``window`` for a scene on the device,
     and the cache records it was interpolated from; ``stages`` (the plan)
     says which cache stages run. ``records`` (of an earlier view of the
     same lit scene) are kept: only the shading points they do not cover
     get new cache points and gathering. ``should_stop`` is polled between
-    the stages and between gather batches (RenderCancelled)."""
+    the stages and between gather batches (RenderCancelled); ``say`` is
+    told the name of each stage as it starts (the status line)."""
+    say = say or (lambda text: None)
     stats: dict = {"photons": maps.stats}
+    say("shading points")
     with timer.stage("shading_points"):
         points = shading_points.trace(device, buffers, window, settings.max_bounces, settings.gi_subpixels,
                                         scene_defines)
@@ -88,10 +91,11 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     indirect = caustic = None
     if "final_gather" in stages and n:
         irradiance, records = _cached_irradiance(device, buffers, points, settings, maps, scene_defines, timer,
-                                                 should_stop, records, stats)
+                                                 should_stop, records, stats, say)
         indirect = points.scatter(irradiance)
         check_stop(should_stop)
     if "caustics" in stages and n:
+        say("caustics")
         with timer.stage("caustics"):
             estimate = device.empty(16 * n)
             maps.caustic_map.irradiance_on_device(points.pos, points.nrm, n, settings.photon_k, estimate)
@@ -104,7 +108,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
 
 def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: RenderSettings, maps: PhotonMaps,
                        scene_defines: dict, timer: StageTimer, should_stop, records: CacheRecords | None,
-                       stats: dict) -> tuple[cl.Buffer, CacheRecords]:
+                       stats: dict, say) -> tuple[cl.Buffer, CacheRecords]:
     """Indirect irradiance (float4 per shading point) and the records it
     comes from: cache points chosen among the points ``records`` leave
     uncovered (all of them without records), gathered, clamped, and
@@ -113,6 +117,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
     prior = index = None
     todo, kept = points, 0
     if records is not None and records.count:
+        say("cache coverage")
         with timer.stage("coverage"):
             flag = device.empty(4 * n)
             prior, _ = interpolation.interpolate_on_device(device, records.pos, records.nrm, records.e, records.r,
@@ -123,6 +128,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
     new = None
     if todo.count:
         seeds = settings.cache_seeds if index is None else max(1, round(settings.cache_seeds * todo.count / n))
+        say("cache points")
         with timer.stage("sample_points"):
             chosen = samples.select(device, todo.pos, todo.nrm, todo.pixel, todo.count, todo.width, todo.height,
                                     min(seeds, todo.count), alpha=settings.cache_alpha, seed=settings.seed)
@@ -130,6 +136,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         with timer.stage("cut"):
             the_cut, gather_cut, cut_reused = _cut(device, maps, settings)
         check_stop(should_stop)
+        say("gathering")
         with timer.stage("gather"):
             # the streams of new records go on from the kept ones' (no repeated noise)
             gathered = gather.gather(device, buffers, chosen.pos, chosen.nrm, chosen.count,
@@ -143,6 +150,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
                      outliers_clamped=outliers_clamped)
     merged = _merged(device, records if kept else None, new)
     stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}
+    say("interpolation")
     with timer.stage("interpolate"):
         if index is None:
             irradiance, interp = interpolation.interpolate_on_device(

@@ -209,3 +209,22 @@ def test_bad_input_mid_session_shows_in_the_status_and_the_next_good_edit_render
     status = sync_and_render(edits.apply(lambda: setattr(bpy.data.lights[0], "energy", 1e12)))
     assert status.startswith("GPU GI | gi | sample 2/2") and np.isfinite(session.latest()[0]).all()
     session.stop()
+
+
+def test_the_status_line_names_each_stage_while_it_runs(room, device, monkeypatch):
+    import blender_addon.viewport as viewport
+
+    monkeypatch.setattr(viewport, "STATUS_SECONDS", 0.0)
+    bpy, *_ = room
+    statuses = []
+    session = ViewportSession(lambda: statuses.append(session.status), make_renderer=lambda spec: Renderer(device))
+    scene, changed = _synced(bpy, SceneSync())
+    session.update_scene(Job(scene, dataclasses.replace(GI, samples=2), None, edits=changed), ("view",))
+    deadline = time.time() + 60
+    while session.busy and time.time() < deadline:
+        time.sleep(0.01)
+    session.stop()
+    for expected in ("preview: photons", "preview: shading points", "preview: gathering", "sample 1/2: rendered",
+                     "sample 2/2: rendered"):
+        assert any(expected in status for status in statuses), expected
+    assert statuses[-1].startswith("GPU GI | gi | sample 2/2")
