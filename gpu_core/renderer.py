@@ -17,10 +17,12 @@ import threading
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
+import pyopencl as cl
+
 from .denoise import denoise
 from .device import Device
 from .device.timer import StageTimer
-from .errors import GpuGiError, check_stop
+from .errors import DeviceError, GpuGiError, check_stop
 from .gi.pipeline import GiField, render_gi
 
 # most cache records held for later views, in units of the Cache Points setting
@@ -65,7 +67,22 @@ class Renderer:
         the camera is compared anyway). ``sample_start`` numbers the first
         camera path of every pixel: renders of ``samples`` paths from 0,
         ``samples``, 2 ``samples``... average to one render of all of them
-        (progressive refinement)."""
+        (progressive refinement). An OpenCL failure on the way (out of
+        memory or resources, a lost device) is a DeviceError saying so, and
+        the renderer forgets what it held: the next render starts afresh."""
+        try:
+            return self._render(scene, settings, progress, should_stop, edits, sample_start)
+        except cl.Error as err:
+            self._forget()
+            raise DeviceError(device_failure(self.device.name, err)) from err
+
+    def _forget(self) -> None:
+        """Drop everything held on the device (after a device failure)."""
+        self._held, self._buffers, self._maps, self._cache, self._records = Held(), None, None, None, {}
+        self._unsynced = set()
+
+    def _render(self, scene: Scene, settings: RenderSettings | None, progress, should_stop, edits,
+                sample_start: int) -> RenderResult:
         settings = (settings or RenderSettings()).validated()
         if edits is not None:
             edits = self._unsynced = set(edits) | self._unsynced
@@ -189,6 +206,16 @@ class Renderer:
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
         return warnings
+
+
+def device_failure(device_name: str, err: Exception) -> str:
+    """What to tell the user of an OpenCL error during a render."""
+    text = str(err).strip() or type(err).__name__
+    if isinstance(err, cl.MemoryError) or "OUT_OF" in text.upper() or "ALLOCATION" in text.upper():
+        return (f"{device_name.strip()} ran out of memory or resources during the render ({text}). Lower the "
+                "resolution, photon counts or cache points, or choose another device in the add-on's preferences.")
+    return (f"{device_name.strip()} failed during the render ({text}); the next render starts afresh. If it "
+            "happens again, choose another device in the add-on's preferences.")
 
 
 def _denoise(passes: dict, quality: str, keep_guides: bool) -> str:
