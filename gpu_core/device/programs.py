@@ -35,6 +35,9 @@ _GENERATED: dict[str, Callable[[], str]] = {
 }
 _OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
 _CACHE_FORMAT = "3"
+# platforms whose program builds must not run in parallel threads, nor
+# load a binary from the disk cache (Oclgrind's compiler crashes on both)
+_SIMULATOR_PLATFORMS = ("oclgrind",)
 # A PoCL program binary holds every kernel compiled for any work-group size,
 # which compiles each kernel a second time (the launches compile their own
 # size): 11 of the 24 s of a first render. There the cache keeps the
@@ -109,6 +112,7 @@ class Programs:
         self.context = context
         self.device = device
         self._separate = device.platform.name.strip() in _SEPARATE_PLATFORMS
+        self._simulator = any(name in device.platform.name.lower() for name in _SIMULATOR_PLATFORMS)
         self.builds: list[BuildRecord] = []
         self._programs: dict[tuple, cl.Program] = {}
         self._pending: dict[tuple, threading.Event] = {}
@@ -149,7 +153,8 @@ class Programs:
             return
         uncached = [not self._cache_entry(n, build_options(d))[2].is_file() for n, d in todo]
         compiled = 0
-        workers = max(1, min(len(todo), os.cpu_count() or 1))
+        # one at a time where the compiler is not safe to run on two threads (Oclgrind's crashes)
+        workers = 1 if self._simulator else max(1, min(len(todo), os.cpu_count() or 1))
         with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gpugi-build") as pool:
             for future, counted in zip([pool.submit(self.get, n, d) for n, d in todo], uncached):
                 future.result()
@@ -172,11 +177,12 @@ class Programs:
     def _build(self, name: str, options: tuple[str, ...]) -> cl.Program:
         start = time.perf_counter()
         source, options, path = self._cache_entry(name, options)
-        program = self._load_cached(path, options)
+        program = None if self._simulator else self._load_cached(path, options)
         from_cache = program is not None
         if program is None:
             program, cached = self._compile(name, source, options)
-            self._store_cached(path, cached)
+            if not self._simulator:
+                self._store_cached(path, cached)
         with self._lock:
             self.builds.append(BuildRecord(name, from_cache, (time.perf_counter() - start) * 1e3))
         return program

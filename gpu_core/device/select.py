@@ -81,12 +81,18 @@ def list_devices() -> list[str]:
     return [info.label for info in describe_devices()]
 
 
+# OpenCL platforms that check kernels rather than run them fast: never chosen automatically
+SIMULATORS = ("oclgrind",)
+
+
 def _match(spec: str, found) -> cl.Device | None:
     spec = spec.strip()
     lowered = spec.lower()
     if lowered in ("", "cpu", "gpu"):
         wanted = cl.device_type.GPU if lowered == "gpu" else cl.device_type.CPU
-        for _, _, devices in found:
+        for _, platform, devices in found:
+            if any(name in platform.name.lower() for name in SIMULATORS):
+                continue  # a simulator runs only when named (GPUGI_DEVICE=oclgrind)
             for dev in devices:
                 if dev.type & wanted:
                     return dev

@@ -59,18 +59,19 @@ __kernel void Cut_exact(POINT_TREE_PARAMS, PHOTON_PARAMS, const __global PointNo
 
 /* One refinement round: an inner cut node whose approximate irradiance
  * differs from the exact one by more than delta of it, or that is mixed,
- * leaves the cut for its two children; `refined` counts them. Only nodes
- * whose exact irradiance is known decide: children that join the cut in
- * this round wait for the next one. */
+ * leaves the cut for its two children; `refined` counts them. The round
+ * reads `in_cut` and writes the next cut into `next` (a copy of it made
+ * before), so no work-item reads a flag another one writes. */
 __kernel void Cut_split(const __global KdNode *nodes, const __global PointNode *info, const __global float4 *exact,
-                        const int n, const float delta, __global int *in_cut, volatile __global int *refined) {
+                        const int n, const float delta, const __global int *in_cut, __global int *next,
+                        volatile __global int *refined) {
     int i = get_global_id(0);
     if (i >= n || !in_cut[i] || nodes[i].axis == KD_LEAF || !(exact[i].w > 0.0f)) return;
     float e = Sampling_luminance(exact[i].xyz);
     if (!(fabs(Cut_approx(info, i) - e) > delta * e || Cut_mixed(nodes, info, i))) return;
-    in_cut[i] = 0;
-    in_cut[i + 1] = 1;
-    in_cut[nodes[i].child] = 1;
+    next[i] = 0;
+    next[i + 1] = 1;
+    next[nodes[i].child] = 1;
     atomic_inc(refined);
 }
 

@@ -138,11 +138,13 @@ def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_ro
     kern("Cut_coarse")(n, nodes, info, parent, np.int32(n), np.float32(e_min), in_cut, exact)
     coarse = _tally(kern, nodes, info, in_cut, n)[0]
     # refinement by exact estimates at the node centres
-    refined, rounds, counter = 0, 0, device.empty(4)
+    refined, rounds, counter, next_cut = 0, 0, device.empty(4), device.empty(4 * n)
     for rounds in range(1, max_rounds + 1):
         kern("Cut_exact")(n, *tree.kernel_args(), *tree.photon_args(), info, in_cut, np.int32(n), np.int32(k), exact)
         device.fill(counter, 0, 4)
-        kern("Cut_split")(n, nodes, info, exact, np.int32(n), np.float32(delta), in_cut, counter)
+        cl.enqueue_copy(device.queue, next_cut, in_cut, byte_count=4 * n)
+        kern("Cut_split")(n, nodes, info, exact, np.int32(n), np.float32(delta), in_cut, next_cut, counter)
+        in_cut, next_cut = next_cut, in_cut
         split = int(device.scalar(counter))
         refined += split
         if not split:

@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 
+import pyopencl as cl
 import pytest
 from conftest import ROOT
 
@@ -86,6 +87,18 @@ def test_default_device_is_the_pocl_cpu_device(monkeypatch):
     assert POCL in dev.device.platform.name.lower()
     assert dev.fallback_message == ""
     assert dev is get_device()  # one device per process
+
+
+def test_an_automatic_choice_skips_a_simulator_platform_listed_first():
+    from types import SimpleNamespace
+
+    from gpu_core.device.select import _match
+
+    simulator = SimpleNamespace(name="Oclgrind Simulator", type=cl.device_type.CPU)
+    cpu = SimpleNamespace(name="pthread CPU", type=cl.device_type.CPU)
+    found = [(0, SimpleNamespace(name="Oclgrind"), [simulator]), (1, SimpleNamespace(name="Portable Computing Language"), [cpu])]
+    assert _match("", found) is cpu and _match("cpu", found) is cpu
+    assert _match("oclgrind", found) is simulator  # named, it is used
 
 
 def test_gpugi_device_naming_a_missing_platform_falls_back_to_cpu(monkeypatch):
