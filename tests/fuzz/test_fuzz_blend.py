@@ -97,7 +97,7 @@ def _user_data(bpy) -> list:
     return [sorted(meshes), sorted(objects_, key=lambda row: row[0]), len(bpy.data.materials)]
 
 
-@settings(max_examples=FUZZ_EXAMPLES, derandomize=True, deadline=None, print_blob=True,
+@settings(max_examples=FUZZ_EXAMPLES, derandomize=True, database=None, deadline=None, print_blob=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(shapes=objects, light_rows=lights, mode=st.sampled_from(["gi", "reference"]))
 def test_a_random_blend_scene_exports_and_renders_finite_pixels_or_says_why(bpy_empty, device, shapes, light_rows,

@@ -155,7 +155,7 @@ def _assert_unchanged(before: Scene, after: Scene) -> None:
     np.testing.assert_array_equal(before.camera.matrix, after.camera.matrix)
 
 
-@settings(max_examples=FUZZ_EXAMPLES, derandomize=True, deadline=None, print_blob=True,
+@settings(max_examples=FUZZ_EXAMPLES, derandomize=True, database=None, deadline=None, print_blob=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.large_base_example,
                                  HealthCheck.function_scoped_fixture])
 @given(scene=scenes(), config=render_settings())
