@@ -28,10 +28,13 @@ class MaterialTable:
         caller across tables (an image is read once until it is edited)."""
         self.rows: list[dict] = [{**DEFAULT_ROW, "name": "default"}]
         self.textures: list[np.ndarray] = []
-        self.warnings: list[str] = []
+        self.exported = 0  # materials read from Blender so far
         self._index: dict = {None: 0}
         self._images: dict = {}
         self._pixels = {} if pixels is None else pixels
+        self._stale: set[str] = set()  # materials edited since their row was made
+        self._notes: dict = {}  # material -> its warnings
+        self._exporting = None
 
     def index(self, material) -> int:
         """Row of ``material`` (None = the default row), exported on first use.
@@ -42,12 +45,35 @@ class MaterialTable:
         key = material.original.name_full if material is not None else None
         if key not in self._index:
             self._index[key] = len(self.rows)
-            self.rows.append(self._export(material))
+            self.rows.append(self._exported(key, material))
+        elif key in self._stale:
+            self.rows[self._index[key]] = self._exported(key, material)
+        self._stale.discard(key)
         return self._index[key]
 
+    def forget(self, name: str) -> None:
+        """Export the material ``name`` again at its next use (it was edited);
+        its row keeps its place, so material ids stay."""
+        self._stale.add(name)
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the materials' export left out, each message once."""
+        return list(dict.fromkeys(message for notes in self._notes.values() for message in notes))
+
+    def _exported(self, key, material) -> dict:
+        """The row of ``material``, its warnings kept under ``key``."""
+        self._exporting, self._notes[key] = key, []
+        self.exported += 1
+        try:
+            return self._export(material)
+        finally:
+            self._exporting = None
+
     def _warn(self, message: str) -> None:
-        if message not in self.warnings:
-            self.warnings.append(message)
+        notes = self._notes.setdefault(self._exporting, [])
+        if message not in notes:
+            notes.append(message)
 
     # -- node tree ------------------------------------------------------------
 

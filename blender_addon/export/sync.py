@@ -6,7 +6,8 @@ datablock). ``SceneSync`` keeps, from one edit to the next, each object's
 triangulated local mesh, each instance's world-space arrays, the material
 table and the images' pixels, and exports again only what an update
 invalidates: a moved object is transformed again, an edited mesh
-triangulated again, an edited material's table rebuilt (images kept).
+triangulated again, an edited material exported again in its row (an
+edited image reads every material again, other images' pixels kept).
 Lights and the world are read at every sync (a few values each). The sync
 names the scene parts that changed (gpu_core's PARTS), so the renderer
 re-uploads only those and skips hashing the rest.
@@ -34,10 +35,6 @@ SILENT_TYPES = {"CAMERA", "EMPTY", "ARMATURE", "LIGHT_PROBE", "SPEAKER", "LATTIC
 _POLL_EVERY = 2000
 # per-object ray visibility switches (Object > Visibility) this engine does not honour
 _RAY_VISIBILITY = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_shadow")
-# datablock kinds whose edit changes how materials look (an edit inside a
-# material's node tree, or a node group it uses, also updates the material;
-# a node tree alone may be the world's)
-_SHADING_KINDS = {"material", "image", "texture"}
 
 
 @dataclass(frozen=True)
@@ -87,7 +84,7 @@ class SyncStats:
 
     meshes_triangulated: int = 0
     instances_transformed: int = 0
-    materials_exported: bool = False
+    materials_exported: int = 0  # materials read from Blender (the edited ones after an edit)
     edits: set = field(default_factory=set)
     ms: float = 0.0
 
@@ -105,6 +102,7 @@ class SceneSync:
         self._instances: dict[tuple, _Instance] = {}
         self._pixels: dict = {}  # image name -> linear pixels, kept until the image is edited
         self._table: MaterialTable | None = None
+        self._exported_before = 0
         self._scene: Scene | None = None
         self.stats = SyncStats()
 
@@ -149,6 +147,7 @@ class SceneSync:
             order.append(key)
         warnings.extend(f"{kind} objects are not supported and were skipped" for kind in sorted(skipped_types))
         warnings.extend(table.warnings)
+        self.stats.materials_exported = table.exported - self._exported_before
         scene, edits = self._assemble(instances, order, table, light_rows, world_radiance(depsgraph.scene.world, warnings),
                                       camera, warnings)
         self._instances, self._scene = instances, scene
@@ -159,23 +158,27 @@ class SceneSync:
     # -- what an edit invalidates -------------------------------------------------
 
     def _invalidate(self, updates: list[Update] | None) -> None:
-        """Forget what the updates make stale: everything when they are not known."""
+        """Forget what the updates make stale: everything when they are not
+        known. An edit inside a material's node tree, or a node group it
+        uses, also updates the material (a node tree alone may be the world's)."""
         if updates is None:
             self._meshes, self._instances, self._pixels, self._table = MeshCache(), {}, {}, None
             return
         for update in updates:
             if update.kind in ("object", "data") and update.geometry:
                 self._meshes.forget(update.name)
-            if update.kind == "image":
+            if update.kind == "material":
+                if self._table is not None:
+                    self._table.forget(update.name)  # exported again at its next use, in its row
+            elif update.kind in ("image", "texture"):  # every material is read again
                 self._pixels.pop(update.name, None)
-            if update.kind in _SHADING_KINDS:
                 self._table = None
 
     def _material_table(self) -> MaterialTable:
         """The material table kept, or a new one (its images' pixels kept)."""
         if self._table is None:
             self._table = MaterialTable(self._pixels)
-            self.stats.materials_exported = True
+        self._exported_before = self._table.exported
         return self._table
 
     def _local_mesh(self, obj) -> LocalMesh | None:

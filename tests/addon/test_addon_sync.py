@@ -106,11 +106,11 @@ def _world_colour(bpy):
 
 
 @pytest.mark.parametrize("edit, parts, triangulated, transformed, materials", [
-    (_light_power, {"lights"}, 0, 0, False),
-    (_material_colour, {"materials"}, 0, 0, True),
-    (_move_cube, {"geometry"}, 0, 1, False),
-    (_edit_mesh, {"geometry"}, 1, 1, False),
-    (_world_colour, {"world"}, 0, 0, False),
+    (_light_power, {"lights"}, 0, 0, 0),
+    (_material_colour, {"materials"}, 0, 0, 1),  # the edited material alone is read again
+    (_move_cube, {"geometry"}, 0, 1, 0),
+    (_edit_mesh, {"geometry"}, 1, 1, 0),
+    (_world_colour, {"world"}, 0, 0, 0),
 ], ids=["light_power", "material_colour", "move_object", "edit_mesh", "world_colour"])
 def test_an_edit_exports_only_what_it_changed_and_gives_the_fresh_export(room, edit, parts, triangulated,
                                                                          transformed, materials):
@@ -228,3 +228,19 @@ def test_the_status_line_names_each_stage_while_it_runs(room, device, monkeypatc
                      "sample 2/2: rendered"):
         assert any(expected in status for status in statuses), expected
     assert statuses[-1].startswith("GPU GI | gi | sample 2/2")
+
+
+def test_a_material_edit_that_drops_an_unknown_node_drops_its_warning(room):
+    bpy, edits, _floor, _cube, material = room
+    tree = material.node_tree
+    toon = tree.nodes.new("ShaderNodeBsdfToon")
+    principled = tree.nodes["Principled BSDF"]
+    tree.links.new(toon.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    sync = SceneSync()
+    scene, _ = _synced(bpy, sync)
+    assert any("ShaderNodeBsdfToon" in w for w in scene.warnings)
+    scene, changed = _synced(bpy, sync, edits.apply(
+        lambda: tree.links.new(principled.outputs[0], tree.nodes["Material Output"].inputs["Surface"])))
+    assert changed == {"materials"} and sync.stats.materials_exported == 1
+    assert not any("ShaderNodeBsdfToon" in w for w in scene.warnings)
+    _assert_same_scene(scene, export_scene(bpy.context.evaluated_depsgraph_get()))
