@@ -15,9 +15,9 @@ one JSON line each on standard output, the medians of ``--repeat`` runs:
 {"event", "first_ms" (edit to the first image shown), "full_gi_ms" (to the
 first full-resolution image), "main_thread_ms" (the sync on Blender's
 thread), "plan" (the stages of the first full-resolution render),
-"runs"}; then a line with the process's memory after ``--edits`` light
-edits in a row (each restarting the worker), against the memory after 10
-(both with the worker stopped: what stays held).
+"runs"}; then a line with the process's memory after 10, 100, 250, 500,
+1,000 ... and ``--edits`` light edits in a row (each restarting the
+worker), each sampled with the worker stopped (what stays held).
 
     python bench/viewport.py FILE.blend [--size 640x360] [--preset preview] [--repeat 3] [--edits 1000]
 
@@ -205,16 +205,17 @@ def main() -> None:
     light = edits(bpy, size).get("light")
     if light is not None and args.edits > 0:
         memory = {}
+        checkpoints = {10, args.edits} | {n for n in (100, 250, 500, 1000, 2000, 3000) if n < args.edits}
         for run in range(args.edits):
             light(run)
             bpy.context.view_layer.update()
             viewport.update()
-            if run + 1 in (10, args.edits):
+            if run + 1 in checkpoints:
                 viewport.session.stop()  # what stays held, not what a running render holds for a while
                 gc.collect()
-                memory[run + 1] = rss_mb()
-        line = {"event": "memory", "edits": args.edits, "rss_mb_after_10": round(memory.get(10, 0.0), 1),
-                f"rss_mb_after_{args.edits}": round(memory[args.edits], 1)}
+                memory[run + 1] = round(rss_mb(), 1)
+        line = {"event": "memory", "edits": args.edits, "rss_mb_after": memory,
+                "growth_mb_after_10": round(memory[args.edits] - memory.get(10, memory[args.edits]), 1)}
         lines.append(json.dumps(line))
         print(lines[-1], flush=True)
         results.append(line)
