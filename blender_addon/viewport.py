@@ -152,7 +152,7 @@ class Accumulation:
                 self._sums[name] = self._sums[name] + weighted if name in self._sums else weighted
         self.samples += step.samples
         image = self._sums["Combined"] / np.float32(self.samples)
-        label = f"sample {self.samples}" + (f"/{self.target}" if self.target > 0 else "")
+        label = self.label(self.samples)
         if self.denoise and self.samples >= self.target > 0:
             guides = [self._sums[name] / np.float32(self.samples) for name in DENOISE_GUIDES]
             try:
@@ -161,6 +161,10 @@ class Accumulation:
             except GpuGiError as err:
                 label += f", not denoised: {err}"
         return image, label
+
+    def label(self, samples: int) -> str:
+        """'sample 12/32' (or 'sample 12' without a target)."""
+        return f"sample {samples}" + (f"/{self.target}" if self.target > 0 else "")
 
 
 class ViewportSession:
@@ -313,8 +317,7 @@ class ViewportSession:
     def _progress(self, step: Pass, film: "Accumulation", stop: threading.Event):
         """The renderer's progress as the status line ("gathering", "sample 3/32:
         rendered 4096/230400 pixels"), redrawn at most every STATUS_SECONDS."""
-        label = "preview" if step.coarse else f"sample {film.samples + step.samples}" + (
-            f"/{film.target}" if film.target > 0 else "")
+        label = "preview" if step.coarse else film.label(film.samples + step.samples)
         shown = [0.0]
 
         def progress(_fraction: float, message: str) -> None:

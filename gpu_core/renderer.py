@@ -24,9 +24,6 @@ from .device import Device
 from .device.timer import StageTimer
 from .errors import DeviceError, GpuGiError, check_stop
 from .gi.pipeline import GiField, render_gi
-
-# most cache records held for later views, in units of the Cache Points setting
-RECORDS_CAP = 4
 from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
@@ -34,6 +31,9 @@ from .scene.model import Scene
 from .scene.upload import SceneBuffers, upload
 from .scene.validate import GeometryMemo, validate
 from .settings import RenderSettings
+
+# most cache records held for later views, in units of the Cache Points setting
+RECORDS_CAP = 4
 
 
 @dataclass

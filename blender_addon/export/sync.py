@@ -102,7 +102,6 @@ class SceneSync:
         self._instances: dict[tuple, _Instance] = {}
         self._pixels: dict = {}  # image name -> linear pixels, kept until the image is edited
         self._table: MaterialTable | None = None
-        self._exported_before = 0
         self._scene: Scene | None = None
         self.stats = SyncStats()
 
@@ -118,6 +117,7 @@ class SceneSync:
         self._invalidate(updates)
         warnings: list[str] = []
         table = self._material_table()
+        triangulated, exported = self._meshes.triangulated, table.exported
         instances, light_rows, order = {}, [], []
         skipped_types: set[str] = set()
         checked: set[str] = set()
@@ -136,7 +136,7 @@ class SceneSync:
                 if obj.type not in SILENT_TYPES:
                     skipped_types.add(obj.type)
                 continue
-            local = self._local_mesh(obj)
+            local = self._meshes.local_mesh(obj)
             if local is None:
                 continue
             if obj.name_full not in checked:
@@ -147,7 +147,8 @@ class SceneSync:
             order.append(key)
         warnings.extend(f"{kind} objects are not supported and were skipped" for kind in sorted(skipped_types))
         warnings.extend(table.warnings)
-        self.stats.materials_exported = table.exported - self._exported_before
+        self.stats.meshes_triangulated = self._meshes.triangulated - triangulated
+        self.stats.materials_exported = table.exported - exported
         scene, edits = self._assemble(instances, order, table, light_rows, world_radiance(depsgraph.scene.world, warnings),
                                       camera, warnings)
         self._instances, self._scene = instances, scene
@@ -178,14 +179,7 @@ class SceneSync:
         """The material table kept, or a new one (its images' pixels kept)."""
         if self._table is None:
             self._table = MaterialTable(self._pixels)
-        self._exported_before = self._table.exported
         return self._table
-
-    def _local_mesh(self, obj) -> LocalMesh | None:
-        before = self._meshes.triangulated
-        local = self._meshes.local_mesh(obj)
-        self.stats.meshes_triangulated += self._meshes.triangulated - before
-        return local
 
     def _instance(self, key: tuple, inst, local: LocalMesh, slot_rows: np.ndarray) -> _Instance:
         """The instance's arrays: kept when its mesh, matrix and materials are the same."""
