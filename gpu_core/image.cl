@@ -1,16 +1,27 @@
 /* The image kernel (also the reference path tracer): camera paths through
- * mirrors and glass to diffuse surfaces, which take direct light from every
- * light with shadow rays and, with diffuse bounces, path-traced indirect
- * light; in GI mode (IMAGE_GI) the first diffuse surface also takes the
- * cached indirect light and caustics. The light is split into Blender's
- * light passes (PASS_*, device/constants.py). */
+ * the scene's BSDFs (shading/bsdf.h). At every event with a smooth lobe
+ * (diffuse or glossy) shadow rays sample the lights and the BSDF samples
+ * the path's next direction, the two weighted by multiple importance
+ * sampling (power heuristic), so neither small lights on rough surfaces
+ * nor large lights on sharp ones are noisy; singular lobes (mirror, smooth
+ * glass) are followed as they are. In GI mode (IMAGE_GI) the diffuse lobe
+ * of the first smooth event reads the cached indirect light and caustics
+ * instead of tracing diffuse bounces; its glossy lobes go on, and where
+ * such a path meets a diffuse surface that surface's light comes from the
+ * illumination cut (IMAGE_GLOSSY_CUT, gi/cut_lookup.h): the photons'
+ * irradiance there, direct light included. The light is split into
+ * Blender's light passes (PASS_*, device/constants.py). */
 #include "device/rng.h"
 #include "device/sampling.h"
 #include "shading/camera.h"
 #include "shading/surface.h"
+#ifdef IMAGE_GLOSSY_CUT
+#include "gi/cut_lookup.h"
+#endif
 
 #define IMAGE_MAX_PASSTHROUGH 64
 #define IMAGE_ALL_LIGHTS 4 /* up to this many lights, every one gets a shadow ray */
+#define LIGHT_WORLD_ROW -1 /* a stand-in light row: the world's light */
 
 /* A path's light is summed per light pass only where the render asks for
  * the passes (IMAGE_LIGHT_PASSES); else in one sum, Combined, which keeps
@@ -26,10 +37,23 @@
 
 /* The GI cache as the image reads it: per slot of the shading-point grid
  * (gpu_core/gi/shading_points.py), position (w = 1 where a point is),
- * normal, indirect and caustic irradiance. */
+ * normal, indirect and caustic irradiance; with glossy surfaces, the cut. */
+#ifdef IMAGE_GLOSSY_CUT
+#define IMAGE_GI_PARAMS                                                      \
+    const __global float4 *gi_pos, const __global float4 *gi_nrm,           \
+        const __global float4 *gi_indirect, const __global float4 *gi_caustic, CUT_PARAMS
+#else
 #define IMAGE_GI_PARAMS                                                      \
     const __global float4 *gi_pos, const __global float4 *gi_nrm,           \
         const __global float4 *gi_indirect, const __global float4 *gi_caustic
+#endif
+
+typedef struct {
+    const __global float4 *pos, *nrm, *indirect, *caustic;
+#ifdef IMAGE_GLOSSY_CUT
+    Cut cut;
+#endif
+} ImageGi;
 
 /* Fraction of light passing along a shadow ray: 0 when an opaque surface
  * blocks it; with see-through (alpha) materials in the scene, the product of
@@ -51,14 +75,13 @@ inline float Image_visibility(const SceneView *sc, float3 org, float3 dir, float
 #endif
 }
 
-/* Light from one light sample of light l at a diffuse point, seen through
- * the scene (shadow rays leave from org, above the surface). */
-inline float3 Image_light_sample(const SceneView *sc, const Light *l, float3 org, float3 ns, Rng *rng) {
-    float u0 = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng);
-    /* sample from the offset origin so the shadow ray ends at the light */
-    LightSample ls = Light_sample(l, &sc->em, org, ns, u0, u1, u2);
-    if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f) || !(ls.dist > 0.0f)) return (float3)(0.0f);
-    return ls.value * Image_visibility(sc, org, ls.dir, ls.dist);
+/* The power heuristic's weight of a BSDF-sampled direction of pdf p_bsdf
+ * that a light sampler would find with pdf p_light (1 where the BSDF
+ * sampled a singular lobe or the light cannot be sampled). */
+inline float Image_mis(float p_bsdf, float p_light) {
+    if (!(p_bsdf > 0.0f) || !(p_light > 0.0f)) return 1.0f;
+    float a = p_bsdf * p_bsdf, b = p_light * p_light;
+    return isfinite(a + b) ? a / (a + b) : (p_bsdf > p_light ? 1.0f : 0.0f);
 }
 
 /* The light row a shadow ray goes to with many lights: picked by u in
@@ -71,56 +94,83 @@ inline int Image_pick_light(const SceneView *sc, float u, float *p) {
     return i;
 }
 
-/* Direct light at a diffuse point, world included: light_samples rounds,
- * averaged. With up to IMAGE_ALL_LIGHTS lights a round sends a shadow ray
- * to every light (the least noise for the rays); with more, one ray to one
- * light picked by power, so a frame's cost does not grow with the number of
- * lights. Shadow rays leave from just above the surface on the side the
- * path arrived from (ng). */
-inline float3 Image_direct(const SceneView *sc, const SurfacePoint *sp, int light_samples, Rng *rng) {
-    float3 sum = (float3)(0.0f);
+/* Shadow rays a light row gets per light-sample round, on average: one
+ * each with few lights, else its pick probability. */
+inline float Image_light_rate(const SceneView *sc, int i) {
+    if (sc->light_count <= IMAGE_ALL_LIGHTS) return 1.0f;
+    return sc->lights[i].pick - (i > 0 ? sc->lights[i - 1].pick : 0.0f);
+}
+
+/* Light from one sample of light l at a scattering point, through the
+ * BSDF f, weighted against BSDF sampling; `rate`: the light's shadow rays
+ * per round x rounds. The light is sampled from the origin of the shadow
+ * ray, just above the surface (so the ray ends at the sampled point), or
+ * just below it where the light lies behind (transmission through rough
+ * glass). Adds the diffuse and glossy parts of f's response. */
+inline void Image_light_sample(const SceneView *sc, const Bsdf *f, const SurfacePoint *sp, const Light *l,
+                               float3 u, float value_scale, float rate, float3 *diffuse, float3 *glossy) {
     float3 org = sp->p + sp->eps * sp->ng;
+    LightSample ls = l->kind == LIGHT_WORLD_ROW ? Light_sample_world(sc->world.xyz, sp->ns, u.y, u.z)
+                                                : Light_sample(l, &sc->em, org, u.x, u.y, u.z);
+    if (dot(ls.dir, sp->ng) < 0.0f) {
+        if (!(f->w_glass > 0.0f) || l->kind == LIGHT_WORLD_ROW) return;
+        org = sp->p - sp->eps * sp->ng;
+        ls = Light_sample(l, &sc->em, org, u.x, u.y, u.z);
+        if (dot(ls.dir, sp->ng) >= 0.0f) return;
+    }
+    if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f) || !(ls.dist > 0.0f)) return;
+    float3 d;
+    float pdf;
+    float3 g = Bsdf_eval(f, Bsdf_to_local(f, ls.dir), &d, &pdf);
+    if (!(d.x > 0.0f || d.y > 0.0f || d.z > 0.0f || g.x > 0.0f || g.y > 0.0f || g.z > 0.0f)) return;
+    float w = ls.pdf > 0.0f ? Image_mis(ls.pdf * rate, pdf) : 1.0f;
+    float3 arriving = ls.value * (value_scale * w * Image_visibility(sc, org, ls.dir, ls.dist));
+    *diffuse += d * arriving;
+    *glossy += g * arriving;
+}
+
+/* Direct light at a scattering point, world included: light_samples
+ * rounds, averaged. With up to IMAGE_ALL_LIGHTS lights a round sends a
+ * shadow ray to every light (the least noise for the rays); with more,
+ * one ray to one light picked by power, so a frame's cost does not grow
+ * with the number of lights. Writes the diffuse and glossy parts. */
+inline void Image_direct(const SceneView *sc, const Bsdf *f, const SurfacePoint *sp, int light_samples, Rng *rng,
+                         float3 *diffuse, float3 *glossy) {
+    *diffuse = *glossy = (float3)(0.0f);
     bool has_world = Scene_has_world(sc);
+    float rounds = (float)light_samples;
     for (int k = 0; k < light_samples; ++k) {
         if (sc->light_count <= IMAGE_ALL_LIGHTS) {
             for (int i = 0; i < sc->light_count; ++i) {
                 Light l = sc->lights[i];
-                sum += Image_light_sample(sc, &l, org, sp->ns, rng);
+                float3 u = (float3)(Rng_next(rng), Rng_next(rng), Rng_next(rng));
+                Image_light_sample(sc, f, sp, &l, u, 1.0f, rounds, diffuse, glossy);
             }
         } else {
             float p;
             Light l = sc->lights[Image_pick_light(sc, Rng_next(rng), &p)];
-            if (p > 0.0f) sum += Image_light_sample(sc, &l, org, sp->ns, rng) / p;
+            float3 u = (float3)(Rng_next(rng), Rng_next(rng), Rng_next(rng));
+            if (p > 0.0f) Image_light_sample(sc, f, sp, &l, u, 1.0f / p, rounds * p, diffuse, glossy);
         }
         if (has_world) {
-            LightSample ls = Light_sample_world(sc->world.xyz, sp->ns, Rng_next(rng), Rng_next(rng));
-            sum += ls.value * Image_visibility(sc, org, ls.dir, LIGHT_FAR);
+            Light world = {.kind = LIGHT_WORLD_ROW};
+            float3 u = (float3)(0.0f, Rng_next(rng), Rng_next(rng));
+            Image_light_sample(sc, f, sp, &world, u, 1.0f, rounds, diffuse, glossy);
         }
     }
-    return sum / (float)light_samples;
-}
-
-/* Radiance of the lights a specular ray passes before tmax; an
- * escaping ray also sees sun disks. */
-inline float3 Image_lights_seen(const SceneView *sc, float3 org, float3 dir, float tmax, bool escaped) {
-    float3 sum = (float3)(0.0f);
-    for (int i = 0; i < sc->light_count; ++i) {
-        Light l = sc->lights[i];
-        sum += Light_seen(&l, org, dir, tmax);
-        if (escaped) sum += Light_sun_seen(&l, dir);
-    }
-    return sum;
+    *diffuse /= rounds;
+    *glossy /= rounds;
 }
 
 /* Light passes, with Cycles' meaning: a path's light goes to the pass of
- * the lobe its first scattering event took (diffuse, glossy = mirror and
- * glass reflection, transmission = glass refraction), "direct" when it
- * arrived after that one event and "indirect" after more; light seen before
- * any scattering is Emission (surfaces) or Environment (the world). Passes
- * before PASS_SUMMED add up to Combined. Caustics repeats the part of them
- * that reached a diffuse surface through specular events (light no shadow
- * ray can sample). Add light c, which arrived after `events` scattering
- * events, to its pass. */
+ * the lobe its first scattering event took (diffuse, glossy = reflection
+ * off metal, glass or the specular layer, transmission = refraction),
+ * "direct" when it arrived after that one event and "indirect" after more;
+ * light seen before any scattering is Emission (surfaces) or Environment
+ * (the world). Passes before PASS_SUMMED add up to Combined. Caustics
+ * repeats the part of them that reached a smooth surface through singular
+ * events (light no shadow ray can sample). Add light c, which arrived
+ * after `events` scattering events, to its pass. */
 inline void Image_add(float3 *light, float3 c, int first_pass, int events, bool environment, bool caustic) {
 #ifdef IMAGE_LIGHT_PASSES
     int p = events == 0 ? (environment ? PASS_ENVIRONMENT : PASS_EMISSION) : first_pass + (events > 1 ? 1 : 0);
@@ -136,7 +186,7 @@ inline void Image_add(float3 *light, float3 c, int first_pass, int events, bool 
  * surface point p (normal n) on pixel (wx, wy) of the window (w x h): among
  * the points of this pixel and its eight neighbours, the nearest one facing
  * the same way. False where none does (a surface no shading ray found). */
-inline bool Image_gi_lookup(IMAGE_GI_PARAMS, int sub, int w, int h, int wx, int wy, float3 p, float3 n,
+inline bool Image_gi_lookup(const ImageGi *gi, int sub, int w, int h, int wx, int wy, float3 p, float3 n,
                             float3 *indirect, float3 *caustic) {
     int best = -1;
     float best_d2 = INFINITY;
@@ -146,8 +196,8 @@ inline bool Image_gi_lookup(IMAGE_GI_PARAMS, int sub, int w, int h, int wx, int 
             if (x < 0 || y < 0 || x >= w || y >= h) continue;
             int first = (y * w + x) * sub * sub;
             for (int k = first; k < first + sub * sub; ++k) {
-                float4 q = gi_pos[k];
-                if (q.w <= 0.0f || dot(gi_nrm[k].xyz, n) < IMAGE_GI_MIN_COS) continue;
+                float4 q = gi->pos[k];
+                if (q.w <= 0.0f || dot(gi->nrm[k].xyz, n) < IMAGE_GI_MIN_COS) continue;
                 float3 d = q.xyz - p;
                 float d2 = dot(d, d);
                 if (d2 < best_d2) {
@@ -158,8 +208,8 @@ inline bool Image_gi_lookup(IMAGE_GI_PARAMS, int sub, int w, int h, int wx, int 
         }
     }
     if (best < 0) return false;
-    *indirect = gi_indirect[best].xyz;
-    *caustic = gi_caustic[best].xyz;
+    *indirect = gi->indirect[best].xyz;
+    *caustic = gi->caustic[best].xyz;
     return true;
 }
 #endif
@@ -174,8 +224,8 @@ inline float3 Image_to_camera(const Camera *cam, float3 d) {
 typedef struct {
     float3 light[IMAGE_SLOTS]; /* by pass (or one sum) */
     float alpha;              /* 0 where a transparent film shows the world */
-    float3 albedo;            /* denoising albedo: at the first diffuse event, or the world */
-    float3 feature_normal;    /* denoising normal (camera space), at the first diffuse event */
+    float3 albedo;            /* denoising albedo: at the first smooth event, or the world */
+    float3 feature_normal;    /* denoising normal (camera space), at the first smooth event */
     float depth;              /* of the first surface hit (1e10 when none) */
     float3 normal;            /* its shading normal */
 } ImagePath;
@@ -185,10 +235,12 @@ typedef struct {
     float3 org, dir;
     float tmin, tmax;
     float3 throughput;
-    int bounces, diffuse, passes;
+    int bounces, smooth, diffuse, passes; /* events: all, smooth ones, diffuse ones; alpha pass-throughs */
     int first_pass;      /* the pass of its first scattering event */
-    bool caustic;        /* a specular event since the last diffuse one (and there was one) */
+    bool caustic;        /* a singular event since the last smooth one (and there was one) */
     bool features_done;  /* the denoising features are taken */
+    float pdf;           /* pdf of the ray's direction (0: singular, or from the camera) */
+    float3 prev_n;       /* shading normal where it left (the world sampler's pdf) */
 } ImageState;
 
 /* The path leaves from p along dir, a new segment. */
@@ -199,70 +251,129 @@ inline void Image_continue(ImageState *st, float3 p, float3 dir) {
     st->tmax = RAY_FAR;
 }
 
-/* A diffuse event at sp: direct light, GI mode's cached light at the first
- * one, then a path-traced bounce while diffuse bounces are left. Returns
+/* Radiance of the lights a ray passes before tmax (an escaping ray also
+ * sees sun disks), each weighted against its light sampler. */
+inline float3 Image_lights_seen(const SceneView *sc, const ImageState *st, int light_samples, float tmax,
+                                bool escaped) {
+    float3 sum = (float3)(0.0f);
+    for (int i = 0; i < sc->light_count; ++i) {
+        Light l = sc->lights[i];
+        float rate = Image_light_rate(sc, i) * (float)light_samples, pdf;
+        float3 seen = Light_seen(&l, st->org, st->dir, tmax, &pdf);
+        sum += seen * Image_mis(st->pdf, pdf * rate);
+        if (escaped) {
+            seen = Light_sun_seen(&l, st->dir, &pdf);
+            sum += seen * Image_mis(st->pdf, pdf * rate);
+        }
+    }
+    return sum;
+}
+
+/* Weight of an emissive triangle's light reached by the path's last ray
+ * (its hit at distance t), against the mesh light's sampler. */
+inline float Image_mesh_mis(const SceneView *sc, const ImageState *st, int light_samples, int tri, float t) {
+    if (!(st->pdf > 0.0f)) return 1.0f;
+    for (int i = 0; i < sc->light_count; ++i) {
+        if (sc->lights[i].kind != LIGHT_MESH) continue;
+        float rate = Image_light_rate(sc, i) * (float)light_samples;
+        return Image_mis(st->pdf, rate * Light_mesh_pdf(&sc->em, tri, st->dir, t));
+    }
+    return 1.0f;
+}
+
+/* The lobes the path may sample next: diffuse ones while diffuse bounces
+ * are left, the others while specular bounces are; in GI mode never the
+ * diffuse lobe (the cache and the cut stand for its light). */
+inline int Image_sample_lobes(const ImageJob *job, const ImageState *st) {
+    int lobes = 0;
+    if (st->bounces >= job->max_bounces + job->max_diffuse) return 0;
+    if (st->diffuse < job->max_diffuse) lobes |= BSDF_SAMPLE_DIFFUSE;
+    if (st->bounces - st->diffuse < job->max_bounces) lobes |= BSDF_SAMPLE_GLOSSY;
+    return lobes;
+}
+
+/* A scattering event at sp: emission was added by the caller; here direct
+ * light (smooth lobes), in GI mode the cache (first smooth event) or the
+ * cut (later ones) for the diffuse lobe, then the next direction. Returns
  * whether the path goes on. */
-inline bool Image_diffuse_event(const SceneView *sc, const Camera *cam, const ImageJob *job, IMAGE_GI_PARAMS,
-                                int wx, int wy, const SurfacePoint *sp, float3 base, Rng *rng, ImageState *st,
-                                ImagePath *path) {
-    if (st->bounces == 0) st->first_pass = PASS_DIFFUSE;
-    if (!st->features_done) {
-        path->albedo = st->throughput * base;
+inline bool Image_scatter(const SceneView *sc, const Camera *cam, const ImageJob *job, const ImageGi *gi, int wx,
+                          int wy, const SurfacePoint *sp, const Material *m, float3 base, Rng *rng, ImageState *st,
+                          ImagePath *path) {
+    Bsdf f = Surface_bsdf(sp, m, base, st->dir, Image_sample_lobes(job, st));
+    bool smooth = Bsdf_has_smooth(&f);
+    if (smooth && !st->features_done) {
+        /* the lobes' colours, as the denoiser's albedo guide */
+        float3 colours = f.diffuse + f.w_metal * f.metal_f0 + f.w_specular * f.spec_f0 + f.w_glass * f.glass_ttint;
+        path->albedo = st->throughput * fmin(colours, (float3)(1.0f));
         path->feature_normal = Image_to_camera(cam, sp->ns);
         st->features_done = true;
     }
-    float3 e = Image_direct(sc, sp, job->light_samples, rng);
-    Image_add(path->light, st->throughput * base * (1.0f / PI_F) * e, st->first_pass, st->bounces + 1, false, false);
 #ifdef IMAGE_GI
-    /* GI mode: indirect light and caustics from the cache at the first diffuse event */
-    float3 e_indirect, e_caustic;
-    if (st->diffuse == 0 && Image_gi_lookup(gi_pos, gi_nrm, gi_indirect, gi_caustic, job->gi_subpixels,
-                                            job->window.x, job->window.y, wx, wy, sp->p, sp->ns, &e_indirect,
-                                            &e_caustic)) {
-        float3 f = st->throughput * base * (1.0f / PI_F);
-        Image_add(path->light, f * e_indirect, st->first_pass, st->bounces + 2, false, false);
-        Image_add(path->light, f * e_caustic, st->first_pass, st->bounces + 2, false, true);
+    bool diffuse_light = f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f;
+    if (st->smooth == 0 && diffuse_light) {
+        /* GI mode: indirect light and caustics from the cache at the first smooth event */
+        float3 e_indirect, e_caustic;
+        if (Image_gi_lookup(gi, job->gi_subpixels, job->window.x, job->window.y, wx, wy, sp->p, sp->ns, &e_indirect,
+                            &e_caustic)) {
+            float3 k = st->throughput * f.diffuse * (1.0f / PI_F);
+            int pass = st->bounces == 0 ? PASS_DIFFUSE : st->first_pass;
+            Image_add(path->light, k * e_indirect, pass, st->bounces + 2, false, false);
+            Image_add(path->light, k * e_caustic, pass, st->bounces + 2, false, true);
+        }
+    }
+#ifdef IMAGE_GLOSSY_CUT
+    if (st->smooth > 0 && diffuse_light) {
+        /* after a glossy bounce: the diffuse lobe's light, direct included, from the cut */
+        float3 e = CutLookup_irradiance(&gi->cut, sp->p, sp->ns);
+        e = (float3)(isfinite(e.x) ? e.x : 0.0f, isfinite(e.y) ? e.y : 0.0f, isfinite(e.z) ? e.z : 0.0f);
+        Image_add(path->light, st->throughput * f.diffuse * (1.0f / PI_F) * fmax(e, (float3)(0.0f)), st->first_pass,
+                  st->bounces + 2, false, false);
+        f.diffuse = (float3)(0.0f);
     }
 #endif
-    /* path-traced indirect light: cosine sampling cancels the Lambert
-     * cosine/pi, leaving the albedo; Russian roulette after two diffuse
-     * bounces keeps the estimate unbiased */
-    if (st->diffuse >= job->max_diffuse || st->bounces >= job->max_bounces + job->max_diffuse) return false;
-    st->throughput *= base;
-    if (st->diffuse >= 2) {
+#endif
+    if (smooth) {
+        float3 d, g;
+        Image_direct(sc, &f, sp, job->light_samples, rng, &d, &g);
+        if (st->bounces == 0) {
+            Image_add(path->light, st->throughput * d, PASS_DIFFUSE, 1, false, false);
+            Image_add(path->light, st->throughput * g, PASS_GLOSSY, 1, false, false);
+        } else {
+            Image_add(path->light, st->throughput * (d + g), st->first_pass, st->bounces + 1, false, false);
+        }
+    }
+    /* the next direction */
+    float u_lobe = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng), u3 = Rng_next(rng);
+    float3 wi, weight;
+    float pdf;
+    int label = Bsdf_sample(&f, u_lobe, u1, u2, u3, &wi, &weight, &pdf);
+    if (label == 0) return false;
+    float3 dir = Bsdf_to_world(&f, wi);
+    if (st->bounces == 0)
+        st->first_pass = (label & BSDF_LABEL_TRANSMIT) ? PASS_TRANSMISSION
+                         : (label & BSDF_LABEL_DIFFUSE) ? PASS_DIFFUSE : PASS_GLOSSY;
+    st->throughput *= weight;
+    bool singular = (label & BSDF_LABEL_SINGULAR) != 0;
+    st->caustic = singular ? (st->caustic || st->smooth > 0) : false;
+    if (!singular) st->smooth++;
+    if (label & BSDF_LABEL_DIFFUSE) st->diffuse++;
+    st->bounces++;
+    st->pdf = pdf;
+    st->prev_n = sp->ns;
+    /* Russian roulette after two smooth bounces keeps the estimate unbiased */
+    if (!singular && st->smooth > 2) {
         float q = fmin(fmax(fmax(st->throughput.x, st->throughput.y), st->throughput.z), 0.95f);
-        if (Rng_next(rng) >= q) return false;
+        if (!(Rng_next(rng) < q)) return false;
         st->throughput /= q;
     }
-    float3 dir = Sampling_cosine(sp->ns, Rng_next(rng), Rng_next(rng));
-    if (dot(dir, sp->ng) <= 0.0f) return false;
-    Image_continue(st, sp->p + sp->eps * sp->ng, dir);
-    st->caustic = false;
-    st->diffuse++;
-    st->bounces++;
-    return true;
-}
-
-/* A specular event (mirror, or glass reflection or refraction) at sp.
- * Returns whether the path goes on. */
-inline bool Image_specular_event(const ImageJob *job, const SurfacePoint *sp, const Material *m, int lobe,
-                                 float3 base, Rng *rng, ImageState *st) {
-    if (st->bounces >= job->max_bounces + job->max_diffuse) return false;
-    bool refracted;
-    float u = lobe == BSDF_GLASS ? Rng_next(rng) : 0.0f;
-    float3 dir = st->dir, org;
-    st->throughput *= Surface_specular(sp, m, lobe, base, u, &dir, &org, &refracted);
-    if (st->bounces == 0) st->first_pass = refracted ? PASS_TRANSMISSION : PASS_GLOSSY;
-    Image_continue(st, org, dir);
-    st->caustic = st->diffuse > 0;
-    st->bounces++;
+    Image_continue(st, Surface_leave(sp, dir), dir);
     return true;
 }
 
 /* Follow the camera path through image position (px, py) (pixel (wx, wy)
  * of the window) until it ends; writes what it brings into `path`. */
-inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *job, IMAGE_GI_PARAMS,
-                       int wx, int wy, float px, float py, Rng *rng, ImagePath *path) {
+inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *job, const ImageGi *gi, int wx, int wy,
+                       float px, float py, Rng *rng, ImagePath *path) {
     ImageState st = {.throughput = (float3)(1.0f), .first_pass = PASS_DIFFUSE};
     Camera_ray(cam, px, py, &st.org, &st.dir, &st.tmin, &st.tmax);
     for (int p = 0; p < IMAGE_SLOTS; ++p) path->light[p] = (float3)(0.0f);
@@ -272,20 +383,20 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
     while (true) {
         Hit hit;
         bool found = KdTree_intersect(&sc->tree, st.org, st.dir, st.tmin, st.tmax, &hit);
-        /* emitters hit by the path count unless a shadow ray already
-         * sampled them (next-event estimation at a diffuse event): before
-         * any diffuse event, or after specular events that followed one */
-        bool unsampled = st.diffuse == 0 || st.caustic;
         /* lights are see-through emitters: add those before the surface. As
          * in Cycles by default, only scattered rays see them, not the camera */
-        if (st.bounces > 0 && unsampled && sc->light_count > 0) {
-            float3 seen = Image_lights_seen(sc, st.org, st.dir, found ? hit.t : st.tmax, !found);
+        if (st.bounces > 0 && sc->light_count > 0) {
+            float3 seen = Image_lights_seen(sc, &st, job->light_samples, found ? hit.t : st.tmax, !found);
             Image_add(path->light, st.throughput * seen, st.first_pass, st.bounces, false, st.caustic);
         }
         if (!found) {
-            if (st.bounces == 0 && st.passes == 0 && sc->world.w > 0.0f) path->alpha = 0.0f;
-            else if (unsampled)
-                Image_add(path->light, st.throughput * sc->world.xyz, st.first_pass, st.bounces, true, st.caustic);
+            if (st.bounces == 0 && st.passes == 0 && sc->world.w > 0.0f) {
+                path->alpha = 0.0f;
+            } else {
+                float w = Image_mis(st.pdf, fmax(dot(st.prev_n, st.dir), 0.0f) / PI_F * (float)job->light_samples);
+                Image_add(path->light, st.throughput * sc->world.xyz * (st.bounces > 0 ? w : 1.0f), st.first_pass,
+                          st.bounces, true, st.caustic);
+            }
             if (!st.features_done) path->albedo = st.throughput;
             return;
         }
@@ -302,13 +413,11 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
             path->depth = Camera_depth(cam, sp.p);
             path->normal = sp.ns;
         }
-        if (unsampled) Image_add(path->light, st.throughput * m.emission.xyz, st.first_pass, st.bounces, false, st.caustic);
-        int lobe = Bsdf_pick(&m, Rng_next(rng));
-        bool goes_on = lobe == BSDF_DIFFUSE
-            ? Image_diffuse_event(sc, cam, job, gi_pos, gi_nrm, gi_indirect, gi_caustic, wx, wy, &sp, base, rng, &st,
-                                  path)
-            : Image_specular_event(job, &sp, &m, lobe, base, rng, &st);
-        if (!goes_on) return;
+        if (m.emission.x > 0.0f || m.emission.y > 0.0f || m.emission.z > 0.0f) {
+            float w = st.bounces > 0 ? Image_mesh_mis(sc, &st, job->light_samples, hit.tri, hit.t) : 1.0f;
+            Image_add(path->light, st.throughput * m.emission.xyz * w, st.first_pass, st.bounces, false, st.caustic);
+        }
+        if (!Image_scatter(sc, cam, job, gi, wx, wy, &sp, &m, base, rng, &st, path)) return;
     }
 }
 
@@ -360,6 +469,11 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
     if (i >= job.window.z || g >= window_pixels) return;
     SceneView sc = SCENE_MAKE();
     Camera cam = *sc.camera;
+#ifdef IMAGE_GLOSSY_CUT
+    ImageGi gi = {gi_pos, gi_nrm, gi_indirect, gi_caustic, CUT_MAKE()};
+#else
+    ImageGi gi = {gi_pos, gi_nrm, gi_indirect, gi_caustic};
+#endif
     int2 wp = Image_pixel_of(g, job.window.x, job.window.y);
     int wx = wp.x, wy = wp.y;
     int o = wy * job.window.x + wx; /* where the pixel's outputs go (rows) */
@@ -384,7 +498,7 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
         ImagePath path;
         float sx = (float)px + 0.5f + Image_filter_offset(pixel_filter, aa.x);
         float sy = (float)py + 0.5f + Image_filter_offset(pixel_filter, aa.y);
-        Image_path(&sc, &cam, &job, gi_pos, gi_nrm, gi_indirect, gi_caustic, wx, wy, sx, sy, &rng, &path);
+        Image_path(&sc, &cam, &job, &gi, wx, wy, sx, sy, &rng, &path);
         Image_accumulate(&path, job.clamp, pixel_light);
         alpha_sum += path.alpha;
         albedo_sum += path.albedo;

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .errors import BudgetError
+from .gi import cut as gi_cut
 from .gi import pipeline as gi_pipeline
 from .image import film_bytes
 from .image import programs as image_programs
@@ -148,6 +149,10 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         if records_reused:
             reuse["cache_records"] = "only the view changed: records in world space are kept"
         stages += _gi_stages(maps, reused, cache_reused, records_reused)
+        if "glossy" in stages and maps["global"].startswith("built"):
+            # glossy paths read the cut where they land on diffuse surfaces
+            stages.append("glossy_cut")
+            image_defines.update(IMAGE_GLOSSY_CUT=1, **gi_cut.image_lookup_defines())
     if settings.denoise:
         stages.append("denoise")
     if "geometry" not in changed:
@@ -168,6 +173,8 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
     features = []
     if scene.has_specular():
         features.append("specular_paths")
+    if scene.has_glossy():
+        features.append("glossy")
     if settings.diffuse_bounces > 0 and settings.mode != "gi":
         features.append("path_traced_indirect")
     if scene.has_textures():

@@ -1,8 +1,8 @@
 """Blender materials (Cycles node trees) to gpu_core material rows.
 
 Supported: Principled BSDF (Base Color, Metallic, Roughness, Transmission
-Weight, IOR, Emission Color x Strength, Alpha), Diffuse, Glossy, Glass and
-Emission shaders, Add and Mix Shader over them (emission is summed, the
+Weight, IOR, Specular IOR Level, Specular Tint, Emission Color x Strength,
+Alpha), Diffuse, Glossy, Glass and Emission shaders, Add and Mix Shader over them (emission is summed, the
 surface is the dominant shader), and an Image Texture on Base Color or
 Color. Anything else falls back to a default value and is named in the
 warnings; nothing here raises on an unexpected node tree.
@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpu_core.scene import MATERIAL_GLASS, MATERIAL_GLOSSY
+
 DEFAULT_ROW = {"base_color": (0.8, 0.8, 0.8), "roughness": 0.5}
 BLACK = (0.0, 0.0, 0.0)
 _GLOSSY = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
 _SRGB_SPACES = ("sRGB", "sRGB EOTF")
 # Principled layers the renderer has no model for, with the input that switches them on
-_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"))
+_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
+                           ("Anisotropic", "anisotropy"))
 
 
 class MaterialTable:
@@ -103,14 +106,19 @@ class MaterialTable:
         if kind == "ShaderNodeBsdfDiffuse":
             return {**self._color(name, node.inputs["Color"]), "roughness": 1.0}
         if kind in _GLOSSY:
+            anisotropy = node.inputs.get("Anisotropy")
+            if anisotropy is not None and (anisotropy.is_linked or anisotropy.default_value != 0.0):
+                self._warn(f"material '{name}': anisotropy on {node.name} is not supported; rendered isotropic")
             return {
                 **self._color(name, node.inputs["Color"]),
+                "shader": MATERIAL_GLOSSY,
                 "metallic": 1.0,
                 "roughness": self._value(name, node.inputs["Roughness"]),
             }
         if kind == "ShaderNodeBsdfGlass":
             return {
                 **self._color(name, node.inputs["Color"]),
+                "shader": MATERIAL_GLASS,
                 "transmission": 1.0,
                 "roughness": self._value(name, node.inputs["Roughness"]),
                 "ior": self._value(name, node.inputs["IOR"]),
@@ -136,6 +144,8 @@ class MaterialTable:
             "roughness": self._value(name, inputs["Roughness"]),
             "transmission": self._value(name, inputs["Transmission Weight"]),
             "ior": self._value(name, inputs["IOR"]),
+            "specular_ior_level": self._value(name, inputs["Specular IOR Level"]),
+            "specular_tint": tuple(self._color_value(name, inputs["Specular Tint"])),
             "alpha": self._value(name, inputs["Alpha"]),
             "emission": tuple(float(c) for c in emission),
         }

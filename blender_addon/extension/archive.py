@@ -13,8 +13,9 @@ MANIFEST = "blender_manifest.toml"
 # (python -m blender_addon) and this build tool.
 REPO_ONLY = ("__main__.py", "cli.py", "extension")
 
-# What gpu_core needs at run time: its modules and the OpenCL sources.
-CORE_SUFFIXES = (".py", ".cl", ".h")
+# What gpu_core needs at run time: its modules, the OpenCL sources and the
+# microfacet albedo tables.
+CORE_SUFFIXES = (".py", ".cl", ".h", ".npz")
 
 
 def addon_files(addon_dir: Path):

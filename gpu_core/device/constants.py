@@ -23,6 +23,16 @@ LIGHT_MESH = 4  # all emissive triangles, sampled as one light row
 AREA_RECTANGLE = 0
 AREA_ELLIPSE = 1
 
+# material rows' shaders (shading/bsdf.h): the Principled BSDF, or the
+# Glossy or Glass shader node alone
+MATERIAL_PRINCIPLED = 0
+MATERIAL_GLOSSY = 1
+MATERIAL_GLASS = 2
+# Below this roughness a metal or glass lobe bends light into caustics: the
+# photons it scatters are caustic photons (the caustic map) and its camera
+# paths are followed as specular ones; above it, its light is glossy.
+CAUSTIC_ROUGHNESS = 0.1
+
 # cameras (shading/camera.h)
 CAMERA_PERSP = 0
 CAMERA_ORTHO = 1
@@ -62,6 +72,8 @@ PHOTON_FILTER_EPANECHNIKOV = 2
 PRIM_RADIX_BITS = 4
 
 
-def defines() -> dict[str, int]:
-    """Every constant of this module, as program defines."""
-    return {name: value for name, value in globals().items() if name.isupper() and isinstance(value, int)}
+def defines() -> dict[str, int | str]:
+    """Every constant of this module, as program defines (floats as float
+    literals)."""
+    return {name: f"{value!r}f" if isinstance(value, float) else value
+            for name, value in globals().items() if name.isupper() and isinstance(value, (int, float))}

@@ -70,15 +70,18 @@ KD_NODE = Struct("KdNode", "a kd-tree node in preorder: the left child of an inn
     ("count", "int", "leaf: entries in its index list; inner: 0"),
 ])
 
-MATERIAL = Struct("Material", "a material row", [
+MATERIAL = Struct("Material", "a material row (shading/bsdf.h)", [
     ("base_color", "float4", "rgb; w = alpha"),
     ("emission", "float4", "rgb radiance (colour x strength)"),
+    ("specular_tint", "float4", "rgb: Specular Tint; w: index of the specular layer (1 = none)"),
+    ("specular_fss", "float4", "rgb: the specular layer's mean Fresnel over the hemisphere"),
     ("metallic", "float"),
     ("roughness", "float"),
     ("transmission", "float"),
     ("ior", "float"),
     ("texture", "int", "index into the texture table, -1 for none"),
-    ("pad", "int", "", 3),
+    ("shader", "int", "MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS"),
+    ("pad", "int", "", 2),
 ])
 
 LIGHT = Struct("Light", "a light row; derived values are computed on the host in float64", [

@@ -26,12 +26,14 @@ import pyopencl as cl
 
 from ..errors import DeviceError
 from . import constants, layout
+from ..shading import microfacet_tables
 
 INCLUDE_ROOT = Path(__file__).resolve().parent.parent
 _INCLUDE_RE = re.compile(r'^[ \t]*#[ \t]*include[ \t]+"([^"]+)"[ \t]*$', re.MULTILINE)
 _GENERATED: dict[str, Callable[[], str]] = {
     "device/structs.h": layout.structs_header,
     "device/layout_probe.cl": layout.probe_source,
+    "shading/microfacet_tables.h": microfacet_tables.header,
 }
 _OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
 _CACHE_FORMAT = "3"

@@ -51,6 +51,12 @@ def lookup_defines(k: int) -> dict:
             "CUT_COHERENT": f"{COHERENT!r}f"}
 
 
+def image_lookup_defines() -> dict:
+    """Defines of a program that only looks the cut up (the image kernel's
+    glossy paths): a kNN of CUT_NEIGHBOURS."""
+    return lookup_defines(NEIGHBOURS)
+
+
 def programs(k: int) -> list[tuple[str, dict]]:
     """The programs the cut builds for estimates of ``k`` photons."""
     return [(_PROGRAM, lookup_defines(k))]

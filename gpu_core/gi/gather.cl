@@ -1,11 +1,12 @@
 /* Final gathering [WZPB09]: from every irradiance sample point, a
- * stratified set of cosine-distributed rays, followed through mirrors and
- * glass to their first diffuse hit y, where the radiance arriving is
- * albedo(y) / pi x E(y), E from the illumination cut (cut_lookup.h; its
- * nodes carry the caustic map's light too, gi/cut.py with_caustics).
- * Emitters and the world are not counted here: direct light is traced
- * separately, and light reaching the point from them through mirrors and
- * glass comes from the caustic map.
+ * stratified set of cosine-distributed rays; at each surface y with a
+ * diffuse lobe the radiance arriving is albedo(y) / pi x E(y), E from the
+ * illumination cut (cut_lookup.h; its nodes carry the caustic map's light
+ * too, gi/cut.py with_caustics), and the ray goes on through y's other
+ * lobes (glossy, mirror, glass). Emitters and the world are counted only
+ * after a rough glossy bounce: direct light is traced separately, and light
+ * reaching the point from them through mirrors, glass and near-specular
+ * glossy surfaces comes from the caustic map.
  *
  * One work-group of GATHER_GROUP work-items per sample point: its rays are
  * spread over the group and reduced in local memory to the sample's
@@ -16,13 +17,27 @@
 #include "shading/surface.h"
 #include "gi/cut_lookup.h"
 
+/* Light sources a gather ray sees after a rough glossy bounce (emitters
+ * reached through singular or near-singular ones are the caustic map's). */
+inline float3 Gather_lights_seen(const SceneView *sc, float3 org, float3 dir, float tmax, bool escaped) {
+    float3 sum = (float3)(0.0f);
+    float pdf;
+    for (int i = 0; i < sc->light_count; ++i) {
+        Light l = sc->lights[i];
+        sum += Light_seen(&l, org, dir, tmax, &pdf);
+        if (escaped) sum += Light_sun_seen(&l, dir, &pdf);
+    }
+    return escaped ? sum + sc->world.xyz : sum;
+}
+
 /* Ray r of sample s (at p, normal n): the radiance arriving along it (times
- * pi: albedo(y) E(y)), and the distance of its first hit (< 0 when it
- * reached no diffuse surface). The rays split the unit square into
- * strata x strata cells, one jittered point each. */
+ * pi: albedo(y) E(y) at each surface y with a diffuse lobe, through the
+ * glossy and singular lobes it meets), and the distance of its first hit
+ * (< 0 when it reached no diffuse surface). The rays split the unit square
+ * into strata x strata cells, one jittered point each. */
 inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, float3 p, float3 n, int s, int r,
                          int strata, uint seed, float *distance) {
-    float3 none = (float3)(0.0f);
+    float3 sum = (float3)(0.0f);
     *distance = -1.0f;
     Rng rng = Rng_make((uint)s, (uint)r, seed);
     float u1 = ((float)(r % strata) + Rng_next(&rng)) / (float)strata;
@@ -31,28 +46,35 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
     float3 org = p + Ray_offset(Ray_magnitude(p)) * n;
     float3 throughput = (float3)(1.0f);
     float first_t = -1.0f;
+    bool rough = false; /* the last bounce was rough glossy: light sources count */
     for (int bounce = 0; bounce <= max_specular; ++bounce) {
         Hit hit;
-        if (!KdTree_intersect(&sc->tree, org, dir, 0.0f, RAY_FAR, &hit)) return none;
+        bool found = KdTree_intersect(&sc->tree, org, dir, 0.0f, RAY_FAR, &hit);
+        if (rough) sum += throughput * PI_F * Gather_lights_seen(sc, org, dir, found ? hit.t : RAY_FAR, !found);
+        if (!found) return sum;
         if (bounce == 0) first_t = hit.t;
         SurfacePoint sp = Surface_at(sc, dir, &hit);
         Material m = sc->materials[sp.material];
-        float3 base = Surface_base(sc, &m, sp.uv);
-        /* a diffuse lobe ends the ray; on a purely specular surface it goes on */
-        float diffuse = Surface_diffuse_weight(&m);
-        if (diffuse > 0.0f) {
+        if (rough) sum += throughput * PI_F * m.emission.xyz;
+        Bsdf f = Surface_bsdf(&sp, &m, Surface_base(sc, &m, sp.uv), dir, BSDF_SAMPLE_GLOSSY);
+        if (f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f) {
+            /* a diffuse lobe: its light from the cut */
             *distance = first_t;
-            float3 albedo = throughput * base * diffuse * m.base_color.w;
             float3 e = CutLookup_irradiance(cut, sp.p, sp.ns);
             e = (float3)(isfinite(e.x) ? e.x : 0.0f, isfinite(e.y) ? e.y : 0.0f, isfinite(e.z) ? e.z : 0.0f);
-            return albedo * fmax(e, none);
+            sum += throughput * f.diffuse * m.base_color.w * fmax(e, (float3)(0.0f));
         }
-        bool refracted;
-        int lobe = Bsdf_pick(&m, Rng_next(&rng));
-        float u = lobe == BSDF_GLASS ? Rng_next(&rng) : 0.0f;
-        throughput *= Surface_specular(&sp, &m, lobe, base, u, &dir, &org, &refracted);
+        /* the other lobes carry the ray on */
+        float3 wi, weight;
+        float pdf;
+        int label = Bsdf_sample(&f, Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), &wi, &weight, &pdf);
+        if (label == 0) return sum;
+        throughput *= weight;
+        rough = (label & BSDF_LABEL_GLOSSY) && f.rough >= CAUSTIC_ROUGHNESS;
+        dir = Bsdf_to_world(&f, wi);
+        org = Surface_leave(&sp, dir);
     }
-    return none;
+    return sum;
 }
 
 /* Work-group g gathers sample first + g. Outputs per sample: irradiance

@@ -47,9 +47,11 @@ class GiField:
     caustics: cl.Buffer  # float4 per grid slot: caustic irradiance (rgb)
     subpixels: int
     stats: dict = field(default_factory=dict)
+    glossy_cut: cut.Cut | None = None  # with glossy surfaces: the cut their paths read (IMAGE_GLOSSY_CUT)
 
     def kernel_args(self) -> list:
-        return [self.positions, self.normals, self.indirect, self.caustics]
+        grid = [self.positions, self.normals, self.indirect, self.caustics]
+        return grid + (self.glossy_cut.kernel_args() if self.glossy_cut is not None else [])
 
 
 def strata(rays: int) -> int:
@@ -101,8 +103,10 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
             maps.caustic_map.irradiance_on_device(points.pos, points.nrm, n, settings.photon_k, estimate)
             caustic = points.scatter(estimate)
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
+    # glossy paths read the diffuse light where they land from the cut
+    glossy_cut = _cut(device, maps, settings)[1] if "glossy_cut" in stages else None
     field_ = GiField(points.grid_pos, points.grid_nrm, indirect if indirect is not None else zeros,
-                     caustic if caustic is not None else zeros, points.subpixels, stats)
+                     caustic if caustic is not None else zeros, points.subpixels, stats, glossy_cut)
     return field_, records
 
 

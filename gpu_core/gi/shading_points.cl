@@ -1,7 +1,9 @@
 /* Shading points for the irradiance cache [WZPB09]: camera rays through a
  * grid of sub-pixel positions (so pixels on an edge see both surfaces),
- * followed through mirrors and glass (the likelier of reflection and
- * refraction) to the first surface with a diffuse lobe. */
+ * followed through singular surfaces (mirrors and smooth glass: the
+ * likelier of their directions) to the first surface with a smooth lobe;
+ * it holds a point where it has a diffuse lobe (a glossy-only surface has
+ * none: camera paths go on from it and read the cut, image.cl). */
 #include "device/sampling.h"
 #include "shading/camera.h"
 #include "shading/surface.h"
@@ -45,21 +47,17 @@ __kernel void ShadingPoints_trace(SCENE_PARAMS, const int4 window, const int sub
             tmax = RAY_FAR;
             continue;
         }
-        float diffuse = Surface_diffuse_weight(&m);
-        if (diffuse > 0.0f || bounces >= max_bounces) {
-            out_pos[g] = (float4)(sp.p - pull_back * dir, diffuse > 0.0f ? 1.0f : 0.0f);
+        Bsdf f = Surface_bsdf(&sp, &m, Surface_base(&sc, &m, sp.uv), dir, BSDF_SAMPLE_ALL);
+        bool diffuse = f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f;
+        float3 wi;
+        if (Bsdf_has_smooth(&f) || bounces >= max_bounces || !Bsdf_likeliest(&f, &wi)) {
+            out_pos[g] = (float4)(sp.p - pull_back * dir, diffuse ? 1.0f : 0.0f);
             out_nrm[g] = (float4)(sp.ns, 0.0f);
             return;
         }
-        /* a purely specular surface: follow its likelier direction */
-        bool glass = m.metallic < 0.5f && m.transmission > 0.0f;
-        float u = 0.0f;
-        if (glass) {
-            float cos_t, eta = dot(sp.ng_raw, sp.ng) > 0.0f ? 1.0f / m.ior : m.ior;
-            u = Bsdf_fresnel(fabs(dot(dir, sp.ns)), eta, &cos_t) < 0.5f ? 1.0f : 0.0f;
-        }
-        bool refracted;
-        Surface_specular(&sp, &m, glass ? BSDF_GLASS : BSDF_MIRROR, (float3)(1.0f), u, &dir, &org, &refracted);
+        /* a singular surface: follow its likelier direction */
+        dir = Bsdf_to_world(&f, wi);
+        org = Surface_leave(&sp, dir);
         tmin = 0.0f;
         tmax = RAY_FAR;
         bounces++;

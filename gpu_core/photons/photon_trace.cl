@@ -1,11 +1,14 @@
 /* Photon tracing through the triangle kd-tree, one work item per emitted
- * photon. Scattering follows image.cl: stochastic alpha, then one lobe
- * by the Principled weights (mirror, smooth glass with Fresnel, Lambert);
- * Russian roulette by albedo keeps photon powers even; a limit on
- * scattering events and one on specular bounces end long paths. Three
- * passes (PHOTON_PASS_*) use this kernel:
- *   global:  a photon is stored at every diffuse hit but those of paths
- *            light -> specular+ -> diffuse, which the caustic map holds;
+ * photon. Scattering follows image.cl: stochastic alpha, then a direction
+ * sampled from the surface's BSDF (shading/bsdf.h: diffuse, glossy and
+ * singular lobes); Russian roulette by the sample's weight keeps photon
+ * powers even; a limit on scattering events and one on specular bounces
+ * end long paths. A bounce is "specular" when it is singular or glossy
+ * below CAUSTIC_ROUGHNESS (LuxCore's PhotonGI draws the same line): light
+ * it focuses is a caustic. Three passes (PHOTON_PASS_*) use this kernel:
+ *   global:  a photon is stored at every hit on a surface with a diffuse
+ *            lobe but those of paths light -> specular+ -> diffuse, which
+ *            the caustic map holds;
  *   caustic: only paths light -> specular+ -> diffuse are followed, and the
  *            photon is stored at that diffuse hit;
  *   all:     a photon is stored at every diffuse hit (the global map of a
@@ -20,12 +23,13 @@
 
 #define PHOTON_MAX_PASSTHROUGH 64
 
-/* Russian roulette by albedo: survive with probability max(albedo), the
- * survivor's power scaled by albedo / that probability. */
-inline bool Photon_roulette(float3 albedo, float3 *power, Rng *rng) {
-    float q = fmin(fmax(fmax(albedo.x, albedo.y), albedo.z), 1.0f);
+/* Russian roulette by a scattering weight: survive with probability
+ * max(weight) (at most 1), the survivor's power scaled by weight / that
+ * probability. */
+inline bool Photon_roulette(float3 weight, float3 *power, Rng *rng) {
+    float q = fmin(fmax(fmax(weight.x, weight.y), weight.z), 1.0f);
     if (!(q > 0.0f) || Rng_next(rng) >= q) return false;
-    *power *= albedo / q;
+    *power *= weight / q;
     return true;
 }
 
@@ -87,30 +91,29 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
             org = sp.p - sp.eps * sp.ng;
             continue;
         }
-        int lobe = Bsdf_pick(&m, Rng_next(&rng));
-        if (lobe == BSDF_DIFFUSE) {
-            if (pass == PHOTON_PASS_ALL || (pass == PHOTON_PASS_GLOBAL) != caustic)
-                Photon_store(sp.p, -dir, power, sp.ns, (uint)i * key_stride + stores++, counter, capacity, out_pos,
-                             out_dir, out_power, out_normal, out_key);
-            if (pass == PHOTON_PASS_CAUSTIC || bounces >= max_bounces) break;
-            if (!Photon_roulette(base, &power, &rng)) break;
-            dir = Sampling_cosine(sp.ns, Rng_next(&rng), Rng_next(&rng));
-            if (dot(dir, sp.ng) <= 0.0f) break;
-            org = sp.p + sp.eps * sp.ng;
-            caustic = false;
-            bounces++;
-            continue;
+        Bsdf f = Surface_bsdf(&sp, &m, base, dir, BSDF_SAMPLE_ALL);
+        bool diffuse = f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f;
+        if (diffuse && (pass == PHOTON_PASS_ALL || (pass == PHOTON_PASS_GLOBAL) != caustic)) {
+            Photon_store(sp.p, -dir, power, sp.ns, (uint)i * key_stride + stores++, counter, capacity, out_pos,
+                         out_dir, out_power, out_normal, out_key);
+            if (pass == PHOTON_PASS_CAUSTIC) break;
         }
-        if (bounces >= max_bounces || specular >= max_specular) break;
-        bool refracted;
-        float u = lobe == BSDF_GLASS ? Rng_next(&rng) : 0.0f;
-        float3 tint = Surface_specular(&sp, &m, lobe, base, u, &dir, &org, &refracted);
-        /* a glass reflection keeps all the power: no roulette */
-        if ((lobe == BSDF_MIRROR || refracted) && !Photon_roulette(tint, &power, &rng)) break;
+        if (bounces >= max_bounces) break;
+        float3 wi, weight;
+        float pdf;
+        int label = Bsdf_sample(&f, Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), &wi, &weight, &pdf);
+        if (label == 0) break;
+        bool specular_bounce = (label & BSDF_LABEL_SINGULAR) || ((label & BSDF_LABEL_GLOSSY) && f.rough < CAUSTIC_ROUGHNESS);
+        /* the caustic pass follows specular chains only */
+        if (pass == PHOTON_PASS_CAUSTIC && !specular_bounce) break;
+        if (specular_bounce && specular >= max_specular) break;
+        if (!Photon_roulette(weight, &power, &rng)) break;
+        dir = Bsdf_to_world(&f, wi);
+        org = Surface_leave(&sp, dir);
         /* specular straight from the light starts a caustic path */
-        caustic = bounces == 0 || caustic;
+        caustic = specular_bounce && (bounces == 0 || caustic);
         bounces++;
-        specular++;
+        specular += specular_bounce ? 1 : 0;
     }
     path_out[i].w = (float)hits;
 }

@@ -13,6 +13,9 @@ from ..device.constants import (
     LIGHT_POINT,
     LIGHT_SPOT,
     LIGHT_SUN,
+    MATERIAL_GLASS,
+    MATERIAL_GLOSSY,
+    MATERIAL_PRINCIPLED,
 )
 from .model import PARTS, Camera, Lights, Materials, Scene, ValidationReport, part_digests
 from .validate import validate
@@ -20,5 +23,5 @@ from .validate import validate
 __all__ = [
     "AREA_ELLIPSE", "AREA_RECTANGLE", "CAMERA_ORTHO", "CAMERA_PERSP", "FILTER_BLACKMAN_HARRIS", "FILTER_BOX",
     "FILTER_GAUSSIAN", "LIGHT_AREA", "LIGHT_POINT", "LIGHT_SPOT",
-    "LIGHT_SUN", "PARTS", "Camera", "Lights", "Materials", "Scene", "ValidationReport", "part_digests", "validate",
+    "LIGHT_SUN", "MATERIAL_GLASS", "MATERIAL_GLOSSY", "MATERIAL_PRINCIPLED", "PARTS", "Camera", "Lights", "Materials", "Scene", "ValidationReport", "part_digests", "validate",
 ]

@@ -13,12 +13,23 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..device.constants import AREA_RECTANGLE, CAMERA_PERSP, FILTER_BOX, LIGHT_POINT, LIGHT_SUN
+from ..device.constants import (AREA_RECTANGLE, CAMERA_PERSP, CAUSTIC_ROUGHNESS, FILTER_BOX, LIGHT_POINT, LIGHT_SUN,
+                                MATERIAL_PRINCIPLED)
+
+
+_SINGULAR_ROUGHNESS = 2e-10 ** 0.25  # roughness of MICROFACET_SINGULAR_ALPHA2 (alpha = roughness^2)
 
 
 @dataclass
 class Materials:
-    """One row per material; a triangle's ``material_ids`` entry indexes it."""
+    """One row per material; a triangle's ``material_ids`` entry indexes it.
+
+    The columns are the Principled BSDF's inputs (shading/bsdf.h), or a
+    Glossy or Glass shader node's (``shader``). Unlike Blender's Principled
+    BSDF, a row made here has no specular layer unless it asks for one
+    (``specular_ior_level`` 0: a Lambertian base); the add-on passes
+    Blender's value (0.5 by default).
+    """
 
     base_color: np.ndarray  # (M, 3) float32, linear
     metallic: np.ndarray  # (M,) float32
@@ -28,6 +39,9 @@ class Materials:
     emission: np.ndarray  # (M, 3) float32, colour x strength (radiance)
     alpha: np.ndarray  # (M,) float32
     texture_id: np.ndarray  # (M,) int32 into Scene.textures, -1 for none
+    specular_ior_level: np.ndarray  # (M,) float32: 0 no dielectric layer, 0.5 F0 of the IOR, 1 twice that
+    specular_tint: np.ndarray  # (M, 3) float32: tints F0 of the dielectric layers, F82 of the metal
+    shader: np.ndarray  # (M,) int32: MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS
     names: list[str] = field(default_factory=list)
 
     @staticmethod
@@ -42,6 +56,9 @@ class Materials:
             emission=(0.0, 0.0, 0.0),
             alpha=1.0,
             texture_id=-1,
+            specular_ior_level=0.0,
+            specular_tint=(1.0, 1.0, 1.0),
+            shader=MATERIAL_PRINCIPLED,
             name="",
         )
         rows = [{**defaults, **row} for row in rows] or [dict(defaults, name="default")]
@@ -59,6 +76,9 @@ class Materials:
             emission=column("emission", np.float32, 3),
             alpha=column("alpha", np.float32),
             texture_id=column("texture_id", np.int32),
+            specular_ior_level=column("specular_ior_level", np.float32),
+            specular_tint=column("specular_tint", np.float32, 3),
+            shader=column("shader", np.int32),
             names=[row["name"] for row in rows],
         )
 
@@ -216,10 +236,21 @@ class Scene:
         return np.unique(self.material_ids)
 
     def has_specular(self) -> bool:
-        """Whether a triangle is specular (mirror or glass): specular paths
-        and, where light reaches them, caustics."""
+        """Whether a triangle is near-specular metal or glass (roughness
+        below CAUSTIC_ROUGHNESS): specular paths and, where light reaches
+        them, caustics."""
         used, m = self.used_materials(), self.materials
-        return bool(((m.metallic[used] > 0) | (m.transmission[used] > 0)).any())
+        smooth = np.nan_to_num(m.roughness[used], nan=0.5) < CAUSTIC_ROUGHNESS
+        return bool((smooth & ((m.metallic[used] > 0) | (m.transmission[used] > 0))).any())
+
+    def has_glossy(self) -> bool:
+        """Whether a triangle has a glossy lobe: metal, glass or a
+        dielectric specular layer rougher than a mirror (alpha^2 above
+        shading/microfacet.h's MICROFACET_SINGULAR_ALPHA2)."""
+        used, m = self.used_materials(), self.materials
+        rough = np.nan_to_num(m.roughness[used], nan=0.5) > _SINGULAR_ROUGHNESS
+        lobes = (m.metallic[used] > 0) | (m.transmission[used] > 0) | (m.specular_ior_level[used] > 0)
+        return bool((rough & lobes).any())
 
     def has_textures(self) -> bool:
         """Whether a triangle's material reads a texture."""

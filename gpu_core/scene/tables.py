@@ -10,8 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..device.constants import AREA_ELLIPSE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN
+from ..device.constants import (AREA_ELLIPSE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN,
+                                MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_PRINCIPLED)
 from ..device.layout import CAMERA_DTYPE, LIGHT_DTYPE, MATERIAL_DTYPE, TEXTURE_INFO_DTYPE
+from ..shading import microfacet_tables
 from .model import PARTS, Scene
 
 RADIANCE_MAX = 1e30  # light radiance stays a finite float32
@@ -66,12 +68,39 @@ def material_table(scene: Scene) -> np.ndarray:
     table["base_color"][:, :3] = np.clip(np.nan_to_num(m.base_color), 0.0, 1.0)
     table["base_color"][:, 3] = np.clip(np.nan_to_num(m.alpha, nan=1.0), 0.0, 1.0)
     table["emission"][:, :3] = emission_radiance(scene)
-    table["metallic"] = np.clip(np.nan_to_num(m.metallic), 0.0, 1.0)
+    shader = np.where(np.isin(m.shader, (MATERIAL_GLOSSY, MATERIAL_GLASS)), m.shader, MATERIAL_PRINCIPLED)
+    table["shader"] = shader
+    # the Glossy and Glass nodes are one lobe each
+    table["metallic"] = np.where(shader == MATERIAL_GLOSSY, 1.0, np.where(
+        shader == MATERIAL_GLASS, 0.0, np.clip(np.nan_to_num(m.metallic), 0.0, 1.0)))
+    table["transmission"] = np.where(shader == MATERIAL_GLASS, 1.0, np.where(
+        shader == MATERIAL_GLOSSY, 0.0, np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)))
     table["roughness"] = np.clip(np.nan_to_num(m.roughness), 0.0, 1.0)
-    table["transmission"] = np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)
     table["ior"] = np.clip(np.nan_to_num(m.ior, nan=1.5), 1e-3, 1e3)
     table["texture"] = np.where(m.texture_id < len(scene.textures), m.texture_id, -1)
+    level = np.where(shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.specular_ior_level), 0.0, 1e3), 0.0)
+    tint = np.clip(np.nan_to_num(m.specular_tint, nan=1.0), 0.0, 1e3)
+    table["specular_tint"][:, :3] = tint
+    for row, (ior, lvl, row_tint) in enumerate(zip(table["ior"], level, tint)):
+        eta, fss = specular_layer(float(ior), float(lvl), row_tint)
+        table["specular_tint"][row, 3] = eta
+        table["specular_fss"][row, :3] = fss
     return table
+
+
+def specular_layer(ior: float, level: float, tint) -> tuple[float, np.ndarray]:
+    """The index of Principled's dielectric specular layer for Specular IOR
+    Level ``level`` (Cycles: F0 of the IOR times 2 level; 1 = no layer), and
+    its mean Fresnel over the hemisphere with F0 tinted by ``tint``."""
+    f0 = microfacet_tables.f0_from_ior(ior) * 2.0 * level
+    if f0 <= 0.0:
+        return 1.0, np.zeros(3, np.float32)
+    eta = float(microfacet_tables.ior_from_f0(f0))
+    eta = 1.0 / eta if ior < 1.0 else eta
+    real0 = microfacet_tables.f0_from_ior(eta)
+    s = np.clip((microfacet_tables.fresnel_average(eta) - real0) / max(1.0 - real0, 1e-7), 0.0, 1.0)
+    tinted = np.minimum(real0 * np.asarray(tint, np.float64), 1.0)
+    return eta, (tinted + (1.0 - tinted) * s).astype(np.float32)
 
 
 def emission_radiance(scene: Scene) -> np.ndarray:

@@ -159,7 +159,8 @@ def _shaped(array, shape, dtype) -> np.ndarray:
     return out
 
 
-_MATERIAL_FIELDS = "base_color metallic roughness transmission ior emission alpha texture_id".split()
+_MATERIAL_FIELDS = ("base_color metallic roughness transmission ior emission alpha texture_id specular_ior_level "
+                    "specular_tint shader").split()
 
 
 def _finite_materials(materials: Materials) -> tuple[Materials, list[str]]:

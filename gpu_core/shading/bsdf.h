@@ -1,71 +1,276 @@
-/* Surface scattering: lobe choice, mirror reflection and dielectric Fresnel. */
+/* Surface scattering as Cycles' Principled BSDF builds it (and the Glossy
+ * and Glass shader nodes, as one-lobe cases), every path-following kernel
+ * sharing it:
+ *   metal        weight metallic: GGX reflection, F82-tint Fresnel from the
+ *                base colour (Glossy node: Fresnel = its colour);
+ *   glass        weight (1 - metallic) transmission: GGX reflection and
+ *                refraction by the dielectric Fresnel remapped to the
+ *                tinted F0, refraction tinted by sqrt(base colour) (Glass
+ *                node: F0 untinted, both tinted by its colour);
+ *   specular     weight (1 - metallic)(1 - transmission): a dielectric GGX
+ *                reflection of index eta' (Specular IOR Level) over
+ *   diffuse      Lambert, base colour x that weight x what the specular
+ *                layer leaves (1 - its directional albedo).
+ * All share alpha = roughness^2; reflection lobes get Multiscatter GGX's
+ * energy (microfacet.h); at alpha^2 <= MICROFACET_SINGULAR_ALPHA2 a lobe is
+ * a perfect mirror or smooth glass (sampled only, never evaluated).
+ * Directions are local to the shading normal's frame, wo towards the
+ * viewer (wo.z > 0). Sampling picks one lobe by its estimated albedo and
+ * weighs a smooth direction by the whole BSDF over the mixture pdf. */
 #ifndef GPUGI_BSDF_H
 #define GPUGI_BSDF_H
 #include "device/structs.h"
+#include "shading/microfacet.h"
 
 #define BSDF_DIFFUSE 0
-#define BSDF_MIRROR 1
-#define BSDF_GLASS 2
+#define BSDF_SPECULAR 1
+#define BSDF_METAL 2
+#define BSDF_GLASS 3
+#define BSDF_LOBES 4
 
-/* Pick one lobe with the Principled weights: metallic mirror, then glass by
- * transmission, else diffuse. The weights sum to one, so the pick needs no
- * reweighting. */
-inline int Bsdf_pick(const Material *m, float u) {
-    float w_mirror = clamp(m->metallic, 0.0f, 1.0f);
-    float w_glass = (1.0f - w_mirror) * clamp(m->transmission, 0.0f, 1.0f);
-    if (u < w_mirror) return BSDF_MIRROR;
-    if (u < w_mirror + w_glass) return BSDF_GLASS;
-    return BSDF_DIFFUSE;
-}
+/* labels of a sampled direction */
+#define BSDF_LABEL_DIFFUSE 1
+#define BSDF_LABEL_GLOSSY 2
+#define BSDF_LABEL_SINGULAR 4
+#define BSDF_LABEL_TRANSMIT 8
+
+/* which lobes sampling may choose (all are evaluated) */
+#define BSDF_SAMPLE_DIFFUSE 1
+#define BSDF_SAMPLE_GLOSSY 2 /* every lobe but the diffuse one */
+#define BSDF_SAMPLE_ALL 3
+
+typedef struct {
+    float3 t, b, n;       /* shading frame, n facing the viewer */
+    float3 wo, ng;        /* local: towards the viewer, geometric normal on its side */
+    float rough, alpha2;
+    bool singular;
+    float3 diffuse;       /* Lambert albedo (weights and layering applied) */
+    float w_specular, w_metal, w_glass;
+    float spec_eta;
+    float3 spec_f0, spec_ms;
+    float3 metal_f0, metal_b, metal_ms;
+    bool metal_constant;  /* Glossy node: Fresnel = metal_f0 */
+    float glass_eta;      /* n_t / n_i on this side */
+    float3 glass_f0, glass_rtint, glass_ttint;
+    float q[BSDF_LOBES];  /* probability of sampling each lobe */
+} Bsdf;
+
+inline float Bsdf_avg(float3 c) { return (c.x + c.y + c.z) * (1.0f / 3.0f); }
 
 inline float3 Bsdf_reflect(float3 d, float3 n) { return d - 2.0f * dot(d, n) * n; }
 
-/* Perfect mirror about the shading normal n, or about the geometric normal
- * ng (facing d's origin) where n would reflect below the surface. */
-inline float3 Bsdf_mirror(float3 d, float3 n, float3 ng) {
-    float3 r = Bsdf_reflect(d, n);
-    return dot(r, ng) > 0.0f ? r : Bsdf_reflect(d, ng);
+inline float3 Bsdf_to_local(const Bsdf *f, float3 v) { return (float3)(dot(v, f->t), dot(v, f->b), dot(v, f->n)); }
+
+inline float3 Bsdf_to_world(const Bsdf *f, float3 v) { return v.x * f->t + v.y * f->b + v.z * f->n; }
+
+/* Metal Fresnel at cos to the microfacet normal. */
+inline float3 Bsdf_metal_fresnel(const Bsdf *f, float cos_i) {
+    return f->metal_constant ? f->metal_f0 : Microfacet_fresnel_f82(f->metal_f0, f->metal_b, cos_i);
 }
 
-/* Unpolarised Fresnel reflectance of a dielectric; cos_i > 0 on the incident
- * side, eta = n_incident / n_transmitted. Returns 1 on total internal
- * reflection and writes cos_t otherwise. */
-inline float Bsdf_fresnel(float cos_i, float eta, float *cos_t) {
-    float sin2_t = eta * eta * fmax(0.0f, 1.0f - cos_i * cos_i);
-    if (sin2_t >= 1.0f) {
-        *cos_t = 0.0f;
-        return 1.0f;
-    }
-    float ct = sqrt(1.0f - sin2_t);
-    *cos_t = ct;
-    float rs = (eta * cos_i - ct) / (eta * cos_i + ct);
-    float rp = (cos_i - eta * ct) / (cos_i + eta * ct);
-    return 0.5f * (rs * rs + rp * rp);
+/* Glass: reflected and transmitted parts of the Fresnel at cos to h. */
+inline void Bsdf_glass_fresnel(const Bsdf *f, float cos_i, float3 *r, float3 *t) {
+    float3 fr = Microfacet_fresnel_remap(f->glass_f0, cos_i, f->glass_eta);
+    if (Microfacet_fresnel_dielectric(cos_i, f->glass_eta) >= 1.0f) fr = (float3)(1.0f); /* total internal reflection */
+    *r = fr * f->glass_rtint;
+    *t = ((float3)(1.0f) - fr) * f->glass_ttint;
 }
 
-/* Scatter d off smooth glass: reflect with the Fresnel probability, else
- * refract. `entering` (from the geometric normal) sets the side of the
- * index change; n is the shading normal on the incident side and ng the
- * geometric one, used instead where the smooth normal would send the ray to
- * the wrong side of the surface. Writes whether it refracted. */
-inline float3 Bsdf_glass(float3 d, float3 n, float3 ng, bool entering, float ior, float u, bool *refracted) {
-    float eta = entering ? 1.0f / ior : ior;
-    if (dot(d, n) >= 0.0f) n = ng;
-    float cos_i = -dot(d, n);
-    float cos_t;
-    float f = Bsdf_fresnel(cos_i, eta, &cos_t);
-    *refracted = u >= f;
-    if (!*refracted) return Bsdf_mirror(d, n, ng);
-    float3 t = normalize(eta * d + (eta * cos_i - cos_t) * n);
-    if (dot(t, ng) < 0.0f) return t;
-    /* the smooth normal bent the ray back: refract by the geometric normal */
-    cos_i = -dot(d, ng);
-    f = Bsdf_fresnel(cos_i, eta, &cos_t);
-    if (f >= 1.0f) {
-        *refracted = false;
-        return Bsdf_reflect(d, ng);
+inline float Bsdf_reflect_probability(float3 r, float3 t) {
+    float sum = Bsdf_avg(r + t);
+    return sum > 0.0f ? Bsdf_avg(r) / sum : 1.0f;
+}
+
+/* The BSDF of material m (base: its colour, texture applied) seen from
+ * direction wo_world (towards the viewer) at a surface with shading normal
+ * ns and geometric normal ng (both on the viewer's side); `entering`: the
+ * viewer is outside the object (by the wound normal). `sample`: the
+ * lobes sampling may choose (BSDF_SAMPLE_*). */
+inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns, float3 ng, bool entering,
+                      int sample) {
+    Bsdf f;
+    f.n = dot(ns, wo_world) > 1e-6f ? ns : ng;
+    Sampling_frame(f.n, &f.t, &f.b);
+    f.wo = Bsdf_to_local(&f, wo_world);
+    f.wo.z = fmax(f.wo.z, 1e-6f);
+    f.ng = Bsdf_to_local(&f, ng);
+    float mu = f.wo.z;
+    f.rough = clamp(m->roughness, 0.0f, 1.0f);
+    float alpha = f.rough * f.rough;
+    f.alpha2 = alpha * alpha;
+    f.singular = f.alpha2 <= MICROFACET_SINGULAR_ALPHA2;
+    float metallic = clamp(m->metallic, 0.0f, 1.0f), transmission = clamp(m->transmission, 0.0f, 1.0f);
+    float3 c = fmax(base, (float3)(0.0f)), cc = fmin(c, (float3)(1.0f));
+    float3 tint = fmax(m->specular_tint.xyz, (float3)(0.0f));
+    float3 one = (float3)(1.0f);
+    f.w_metal = metallic;
+    f.w_glass = (1.0f - metallic) * transmission;
+    f.w_specular = (1.0f - metallic) * (1.0f - transmission);
+    /* metal */
+    f.metal_constant = m->shader == MATERIAL_GLOSSY;
+    f.metal_f0 = cc;
+    float3 f_ss = cc;
+    f.metal_b = (float3)(0.0f);
+    if (!f.metal_constant) {
+        /* B from the F82 tint: Schlick at mu = 1/7 times the tint */
+        const float x = 6.0f / 7.0f, x5 = x * x * x * x * x;
+        f.metal_b = mix(cc, one, x5) * (7.0f / (x5 * x)) * (one - fmin(tint, one));
+        f_ss = mix(cc, one, 1.0f / 21.0f) - f.metal_b * (1.0f / 126.0f);
     }
-    return normalize(eta * d + (eta * cos_i - cos_t) * ng);
+    f.metal_ms = Microfacet_multiscatter(f.rough, mu, clamp(f_ss, 0.0f, 1.0f));
+    /* glass */
+    f.glass_eta = entering ? m->ior : 1.0f / m->ior;
+    bool glass_node = m->shader == MATERIAL_GLASS;
+    f.glass_f0 = fmin((float3)(Microfacet_f0(m->ior)) * (glass_node ? one : tint), one);
+    f.glass_rtint = glass_node ? c : one;
+    f.glass_ttint = glass_node ? c : sqrt(cc);
+    /* the specular layer and what it leaves the diffuse base */
+    f.spec_eta = m->specular_tint.w;
+    f.spec_f0 = fmin((float3)(Microfacet_f0(f.spec_eta)) * tint, one);
+    f.spec_ms = Microfacet_multiscatter(f.rough, mu, m->specular_fss.xyz);
+    if (fabs(f.spec_eta - 1.0f) < 1e-5f) f.w_specular = 0.0f;
+    float layer = 1.0f;
+    if (f.w_specular > 0.0f) {
+        float3 albedo = Microfacet_E(f.rough, mu) * f.spec_ms * mix(f.spec_f0, one, Microfacet_S(f.rough, mu, f.spec_eta));
+        layer = clamp(1.0f - fmax(fmax(albedo.x, albedo.y), albedo.z), 0.0f, 1.0f);
+    }
+    f.diffuse = m->shader == MATERIAL_PRINCIPLED ? c * ((1.0f - metallic) * (1.0f - transmission) * layer) : (float3)(0.0f);
+    /* sampling weights: each lobe's albedo, estimated at the normal */
+    float3 gr, gt;
+    Bsdf_glass_fresnel(&f, mu, &gr, &gt);
+    float glossy = (sample & BSDF_SAMPLE_GLOSSY) ? 1.0f : 0.0f;
+    f.q[BSDF_DIFFUSE] = (sample & BSDF_SAMPLE_DIFFUSE) ? Bsdf_avg(f.diffuse) : 0.0f;
+    f.q[BSDF_SPECULAR] = glossy * f.w_specular * Bsdf_avg(Microfacet_fresnel_remap(f.spec_f0, mu, f.spec_eta));
+    f.q[BSDF_METAL] = glossy * f.w_metal * Bsdf_avg(Bsdf_metal_fresnel(&f, mu));
+    f.q[BSDF_GLASS] = glossy * f.w_glass * Bsdf_avg(gr + gt);
+    float total = f.q[0] + f.q[1] + f.q[2] + f.q[3];
+    for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = total > 0.0f ? f.q[i] / total : 0.0f;
+    return f;
+}
+
+/* Whether the material scatters at all by a smooth (evaluable) lobe. */
+inline bool Bsdf_has_smooth(const Bsdf *f) {
+    return (f->diffuse.x > 0.0f || f->diffuse.y > 0.0f || f->diffuse.z > 0.0f) ||
+           (!f->singular && (f->w_specular > 0.0f || f->w_metal > 0.0f || f->w_glass > 0.0f));
+}
+
+/* f cos for the local direction wi over the evaluable lobes, split into
+ * the diffuse part (*diffuse) and the glossy part (returned; transmission
+ * included), and the pdf of sampling wi (Bsdf_sample). */
+inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
+    float3 none = (float3)(0.0f), glossy = none;
+    *diffuse = none;
+    *pdf = 0.0f;
+    bool below = wi.z < 0.0f;
+    if (below != (dot(wi, f->ng) < 0.0f) || wi.z == 0.0f) return none; /* the normals disagree on the side */
+    float3 wo = f->wo;
+    if (!below) {
+        *diffuse = f->diffuse * (wi.z / PI_F);
+        *pdf += f->q[BSDF_DIFFUSE] * wi.z / PI_F;
+        if (f->singular) return none;
+        float lobe_pdf;
+        float v = Microfacet_reflect_eval(f->alpha2, wo, wi, &lobe_pdf);
+        float cos_h = dot(wo, normalize(wo + wi));
+        if (f->w_specular > 0.0f) {
+            glossy += f->w_specular * v * f->spec_ms * Microfacet_fresnel_remap(f->spec_f0, cos_h, f->spec_eta);
+            *pdf += f->q[BSDF_SPECULAR] * lobe_pdf;
+        }
+        if (f->w_metal > 0.0f) {
+            glossy += f->w_metal * v * f->metal_ms * Bsdf_metal_fresnel(f, cos_h);
+            *pdf += f->q[BSDF_METAL] * lobe_pdf;
+        }
+        if (f->w_glass > 0.0f) {
+            float3 r, t;
+            Bsdf_glass_fresnel(f, cos_h, &r, &t);
+            glossy += f->w_glass * v * r;
+            *pdf += f->q[BSDF_GLASS] * lobe_pdf * Bsdf_reflect_probability(r, t);
+        }
+        return glossy;
+    }
+    if (f->singular || !(f->w_glass > 0.0f) || fabs(f->glass_eta - 1.0f) < 1e-4f) return none;
+    float v, lobe_pdf;
+    float3 h;
+    if (!Microfacet_refract_eval(f->alpha2, f->glass_eta, wo, wi, &v, &lobe_pdf, &h)) return none;
+    float3 r, t;
+    Bsdf_glass_fresnel(f, dot(wo, h), &r, &t);
+    *pdf = f->q[BSDF_GLASS] * lobe_pdf * (1.0f - Bsdf_reflect_probability(r, t));
+    return f->w_glass * v * t;
+}
+
+/* Sample a direction: *wi (local), *weight = f cos / pdf, *pdf (0 for a
+ * singular direction). Returns its BSDF_LABEL_* flags, 0 when the sample
+ * is lost (no lobe, below the surface, total internal reflection). */
+inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3, float3 *wi, float3 *weight,
+                       float *pdf) {
+    int lobe = 0;
+    float acc = f->q[0];
+    while (lobe < BSDF_LOBES - 1 && u_lobe >= acc) acc += f->q[++lobe];
+    if (!(f->q[lobe] > 0.0f)) return 0;
+    float3 wo = f->wo, one = (float3)(1.0f);
+    int label;
+    if (lobe == BSDF_DIFFUSE) {
+        float2 d = Sampling_disk(u1, u2);
+        *wi = (float3)(d.x, d.y, sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y)));
+        label = BSDF_LABEL_DIFFUSE;
+    } else {
+        float3 h = f->singular ? (float3)(0.0f, 0.0f, 1.0f) : Microfacet_sample_vndf(wo, sqrt(f->alpha2), u1, u2);
+        float cos_h = dot(wo, h);
+        if (!(cos_h > 0.0f)) return 0;
+        bool refract = false;
+        float3 r = one, t = (float3)(0.0f);
+        if (lobe == BSDF_GLASS) {
+            Bsdf_glass_fresnel(f, cos_h, &r, &t);
+            refract = u3 >= Bsdf_reflect_probability(r, t);
+        }
+        if (refract) {
+            if (!Microfacet_refract(wo, h, f->glass_eta, wi)) return 0;
+        } else {
+            *wi = Bsdf_reflect(-wo, h);
+        }
+        label = (refract ? BSDF_LABEL_TRANSMIT : 0) | (f->singular ? BSDF_LABEL_SINGULAR : BSDF_LABEL_GLOSSY);
+        /* a straight refraction at index 1 is singular at any roughness */
+        if (refract && fabs(f->glass_eta - 1.0f) < 1e-4f) {
+            label = BSDF_LABEL_TRANSMIT | BSDF_LABEL_SINGULAR;
+            *wi = -wo;
+        }
+        if ((wi->z < 0.0f) != refract || (dot(*wi, f->ng) < 0.0f) != refract) return 0;
+        if (label & BSDF_LABEL_SINGULAR) {
+            /* the chosen lobe alone, over its probability */
+            float3 value;
+            if (lobe == BSDF_GLASS) {
+                float p = Bsdf_reflect_probability(r, t);
+                value = f->w_glass * (refract ? t / (1.0f - p) : r / p);
+            } else if (lobe == BSDF_METAL) {
+                value = f->w_metal * f->metal_ms * Bsdf_metal_fresnel(f, cos_h);
+            } else {
+                value = f->w_specular * f->spec_ms * Microfacet_fresnel_remap(f->spec_f0, cos_h, f->spec_eta);
+            }
+            *weight = value / f->q[lobe];
+            *pdf = 0.0f;
+            return label;
+        }
+    }
+    float3 diffuse;
+    float3 glossy = Bsdf_eval(f, *wi, &diffuse, pdf);
+    if (!(*pdf > 0.0f)) return 0;
+    *weight = (glossy + diffuse) / *pdf;
+    return label;
+}
+
+/* The likeliest direction of a singular BSDF: its most probable lobe, and
+ * for glass the likelier of reflection and refraction. False where it
+ * scatters nothing. */
+inline bool Bsdf_likeliest(const Bsdf *f, float3 *wi) {
+    int best = 0;
+    for (int i = 1; i < BSDF_LOBES; ++i) best = f->q[i] > f->q[best] ? i : best;
+    if (!(f->q[best] > 0.0f)) return false;
+    float start = 0.0f;
+    for (int i = 0; i < best; ++i) start += f->q[i];
+    float3 r, t, weight;
+    Bsdf_glass_fresnel(f, f->wo.z, &r, &t);
+    float u3 = best == BSDF_GLASS && Bsdf_reflect_probability(r, t) < 0.5f ? 0.999f : 0.0f;
+    float pdf;
+    return Bsdf_sample(f, start + 0.5f * f->q[best], 0.5f, 0.5f, u3, wi, &weight, &pdf) != 0;
 }
 
 #endif

@@ -50,31 +50,18 @@ inline float3 Surface_base(const SceneView *sc, const Material *m, float2 uv) {
     return base;
 }
 
-/* Weight of the diffuse lobe among the Principled lobes (see Bsdf_pick). */
-inline float Surface_diffuse_weight(const Material *m) {
-    float w_mirror = clamp(m->metallic, 0.0f, 1.0f);
-    float w_glass = (1.0f - w_mirror) * clamp(m->transmission, 0.0f, 1.0f);
-    return fmax(0.0f, 1.0f - w_mirror - w_glass);
+/* The BSDF at sp for a ray that arrived along dir; `sample` as in
+ * Bsdf_make. */
+inline Bsdf Surface_bsdf(const SurfacePoint *sp, const Material *m, float3 base, float3 dir, int sample) {
+    /* the wound normal facing the ray means entering the object */
+    bool entering = dot(sp->ng_raw, sp->ng) > 0.0f;
+    return Bsdf_make(m, base, -dir, sp->ns, sp->ng, entering, sample);
 }
 
-/* Scatter off a specular lobe at sp (BSDF_MIRROR, or BSDF_GLASS with u
- * choosing Fresnel reflection or refraction): writes the new direction, the
- * next ray's origin and whether it refracted, and returns the colour the ray
- * is tinted by (the base colour; white for a reflection off glass). */
-inline float3 Surface_specular(const SurfacePoint *sp, const Material *m, int lobe, float3 base, float u,
-                               float3 *dir, float3 *org, bool *refracted) {
-    *refracted = false;
-    float3 tint = base;
-    if (lobe == BSDF_MIRROR) {
-        *dir = Bsdf_mirror(*dir, sp->ns, sp->ng);
-    } else {
-        /* the wound normal facing the ray means entering the object */
-        bool entering = dot(sp->ng_raw, sp->ng) > 0.0f;
-        *dir = Bsdf_glass(*dir, sp->ns, sp->ng, entering, m->ior, u, refracted);
-        if (!*refracted) tint = (float3)(1.0f);
-    }
-    *org = sp->p + (*refracted ? -sp->eps : sp->eps) * sp->ng;
-    return tint;
+/* Where a ray leaving sp along the world direction dir starts: above the
+ * surface, or below it for a transmitted one. */
+inline float3 Surface_leave(const SurfacePoint *sp, float3 dir) {
+    return sp->p + (dot(dir, sp->ng) < 0.0f ? -sp->eps : sp->eps) * sp->ng;
 }
 
 #endif

@@ -23,7 +23,8 @@ from hypothesis import strategies as st
 from gpu_core.errors import GpuGiError
 from gpu_core.renderer import Renderer
 from gpu_core.scene import (AREA_ELLIPSE, AREA_RECTANGLE, CAMERA_ORTHO, CAMERA_PERSP, LIGHT_AREA, LIGHT_POINT,
-                            LIGHT_SPOT, LIGHT_SUN, Camera, Lights, Materials, Scene)
+                            LIGHT_SPOT, LIGHT_SUN, MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_PRINCIPLED, Camera,
+                            Lights, Materials, Scene)
 from gpu_core.settings import RenderSettings
 
 pytestmark = pytest.mark.fuzz
@@ -75,7 +76,9 @@ def materials(draw) -> Materials:
         rows.append(dict(
             base_color=draw(st.tuples(*[_values(0.0, 1.0)] * 3)), metallic=draw(_values(0.0, 1.0)),
             roughness=draw(_values(0.0, 1.0)), transmission=draw(_values(0.0, 1.0)), ior=draw(_values(1.0, 3.0)),
-            emission=draw(st.tuples(*[st.one_of(st.floats(0.0, 1e4), _ODD)] * 3)), alpha=draw(_values(0.0, 1.0))))
+            emission=draw(st.tuples(*[st.one_of(st.floats(0.0, 1e4), _ODD)] * 3)), alpha=draw(_values(0.0, 1.0)),
+            specular_ior_level=draw(_values(0.0, 1.0)), specular_tint=draw(st.tuples(*[_values(0.0, 1.0)] * 3)),
+            shader=draw(st.sampled_from([MATERIAL_PRINCIPLED, MATERIAL_GLOSSY, MATERIAL_GLASS]))))
     return Materials.make(rows)
 
 

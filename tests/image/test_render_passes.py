@@ -19,8 +19,8 @@ def mixed_scene():
     square half over the floor, an emitter, a point light and a world colour."""
     mats = Materials.make([
         dict(base_color=(0.8, 0.8, 0.8)),  # floor and ceiling
-        dict(base_color=(0.9, 0.9, 0.9), metallic=1.0),  # mirror
-        dict(base_color=(1.0, 1.0, 1.0), transmission=1.0, ior=1.5),  # glass
+        dict(base_color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.0),  # mirror
+        dict(base_color=(1.0, 1.0, 1.0), transmission=1.0, ior=1.5, roughness=0.0),  # glass
         dict(base_color=(0.0, 0.0, 0.0), emission=(2.0, 1.0, 0.5)),  # emitter
     ])
     parts = [
@@ -84,7 +84,7 @@ def test_caustics_pass_matches_the_mirror_image_of_the_light(device):
     up = Lights.make([dict(area, position=(0, 0, light_z), direction=(0, 0, 1.0))])
     mirror = quad((0, 0, height), 40.0, flip=True)
     caustic = render(device, plane_scene(up, camera, extra_tris=[mirror],
-                                         extra_materials=[dict(base_color=(reflectance,) * 3, metallic=1.0)]),
+                                         extra_materials=[dict(base_color=(reflectance,) * 3, metallic=1.0, roughness=0.0)]),
                      samples=256, diffuse_bounces=1)
     image = Lights.make([dict(area, position=(0, 0, 2 * height - light_z), direction=(0, 0, -1.0))])
     direct = render(device, plane_scene(image, camera), samples=16)
@@ -110,7 +110,7 @@ def test_denoising_albedo_and_normal_follow_mirrors_to_the_first_diffuse_surface
     reflectance 0.5 facing up, which sees the world (albedo 0.5 x 1)."""
     mirror = quad((1.0, 0, 0.5), 2.0)
     scene = plane_scene(Lights.make([]), camera_looking_down(height=4.0, ortho=True, size=16), world=(0.3,) * 3,
-                        extra_tris=[mirror], extra_materials=[dict(base_color=(0.5,) * 3, metallic=1.0)])
+                        extra_tris=[mirror], extra_materials=[dict(base_color=(0.5,) * 3, metallic=1.0, roughness=0.0)])
     passes = Renderer(device).render(scene, RenderSettings(samples=4, denoising_passes=True)).passes
     albedo, normal = passes["Denoising Albedo"], passes["Denoising Normal"]
     left, right = np.s_[:, 1:7], np.s_[:, 9:15]

@@ -32,8 +32,8 @@ def test_stats_report_each_stage_time_the_plan_and_the_counts(device):
 
 def test_plan_lists_only_the_features_the_scene_uses(device):
     features = [
-        (dict(base_color=(1, 1, 1), metallic=1.0), "specular_paths"),
-        (dict(base_color=(1, 1, 1), transmission=1.0), "specular_paths"),
+        (dict(base_color=(1, 1, 1), metallic=1.0, roughness=0.0), "specular_paths"),
+        (dict(base_color=(1, 1, 1), transmission=1.0, roughness=0.0), "specular_paths"),
         (dict(base_color=(1, 1, 1), alpha=0.5), "alpha_shadows"),
         (dict(base_color=(0, 0, 0), emission=(1, 1, 1)), "mesh_lights"),
     ]

@@ -166,7 +166,7 @@ def test_no_specular_surface_skips_the_caustic_map(device):
 def test_glass_sphere_focuses_a_caustic(device):
     lights = Lights.make([dict(kind=LIGHT_SPOT, position=(0, 0, 4), power=(100, 100, 100), spot_angle=0.4)])
     glass = sphere((0, 0, 1.0), 0.5)
-    scene = plane_scene(lights, extra_tris=[glass], extra_materials=[dict(base_color=(1, 1, 1), transmission=1.0, ior=1.5)])
+    scene = plane_scene(lights, extra_tris=[glass], extra_materials=[dict(base_color=(1, 1, 1), transmission=1.0, ior=1.5, roughness=0.0)])
     maps = trace_photon_maps(device, scene, global_photons=2000, caustic_photons=20000, seed=2)
     assert maps.stats["maps"]["caustic"].startswith("built")
     tree = maps.caustic_map
@@ -188,7 +188,7 @@ def test_a_mirror_casts_its_share_of_the_light_as_a_caustic(device):
     lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 2), power=(power,) * 3)])
     mirror, ceiling = quad((0, 0, 0.5), 0.5), quad((0, 0, 3), 4.0, flip=True)
     scene = plane_scene(lights, extra_tris=[mirror, ceiling],
-                        extra_materials=[dict(base_color=(reflectance,) * 3, metallic=1.0), dict()])
+                        extra_materials=[dict(base_color=(reflectance,) * 3, metallic=1.0, roughness=0.0), dict()])
     maps = trace_photon_maps(device, scene, global_photons=1000, caustic_photons=100000, seed=3)
     tree = maps.caustic_map
     assert np.all(np.abs(tree.positions()[:, 2] + maps.center[2] - 3) < 1e-4)

@@ -26,7 +26,7 @@ def scene(mirror: bool, size: int):
     if mirror:
         faces.append(quad((0.5, 0, -0.98), 0.6))
         ids += [1, 1]
-        mats.append(dict(base_color=(0.9,) * 3, metallic=1.0))
+        mats.append(dict(base_color=(0.9,) * 3, metallic=1.0, roughness=0.0))
     lights = Lights.make([dict(kind=LIGHT_POINT, position=(0.2, 0.1, 0.5), power=(100,) * 3)])
     camera = camera_looking_down(height=0.9, half_width=1.0, size=size)
     camera.clip_start, camera.clip_end = 1e-3, 20.0

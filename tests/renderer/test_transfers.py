@@ -23,7 +23,7 @@ def mirrored_room():
              quad((1, 0, 0), 2, normal_axis=0, flip=True), quad((0.5, 0, -0.98), 0.6)]
     tris = np.concatenate(faces)
     ids = np.array([0] * 12 + [1, 1], np.int32)
-    mats = Materials.make([dict(base_color=(0.6,) * 3), dict(base_color=(0.9,) * 3, metallic=1.0)])
+    mats = Materials.make([dict(base_color=(0.6,) * 3), dict(base_color=(0.9,) * 3, metallic=1.0, roughness=0.0)])
     lights = Lights.make([dict(kind=LIGHT_POINT, position=(0.2, 0.1, 0.5), power=(100,) * 3)])
     camera = camera_looking_down(height=0.9, half_width=1.0, size=SIZE)
     camera.clip_start, camera.clip_end = 1e-3, 20.0

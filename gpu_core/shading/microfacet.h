@@ -1,0 +1,164 @@
+/* GGX microfacets as Cycles has them: the distribution with alpha =
+ * roughness^2, Smith's height-correlated masking-shadowing, sampling of
+ * the visible normals (Heitz 2018), the dielectric Fresnel and its remap
+ * between a tinted F0 and 1, Cycles' F82-tint conductor Fresnel, and the
+ * albedo tables of Multiscatter GGX (shading/microfacet_tables.py).
+ * Directions are in the local frame of the shading normal (z up). */
+#ifndef GPUGI_MICROFACET_H
+#define GPUGI_MICROFACET_H
+#include "device/sampling.h"
+#include "shading/microfacet_tables.h"
+
+/* At or below this alpha^2 a lobe is a perfect mirror or smooth glass. */
+#define MICROFACET_SINGULAR_ALPHA2 2e-10f
+
+inline float Microfacet_D(float alpha2, float cos_h) {
+    float c2 = fmin(cos_h * cos_h, 1.0f);
+    float d = (1.0f - c2) + alpha2 * c2;
+    return alpha2 / (PI_F * fmax(d * d, 1e-30f));
+}
+
+inline float Microfacet_lambda(float alpha2, float cos_n) {
+    float c2 = fmax(cos_n * cos_n, 1e-30f);
+    return 0.5f * (sqrt(1.0f + alpha2 * fmax(1.0f / c2 - 1.0f, 0.0f)) - 1.0f);
+}
+
+/* A visible normal for the view wo (wo.z > 0), u in [0, 1)^2. */
+inline float3 Microfacet_sample_vndf(float3 wo, float alpha, float u1, float u2) {
+    float3 vh = normalize((float3)(alpha * wo.x, alpha * wo.y, wo.z));
+    float lensq = vh.x * vh.x + vh.y * vh.y;
+    float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
+    float3 t2 = cross(vh, t1);
+    float r = sqrt(u1), phi = 2.0f * PI_F * u2;
+    float a = r * cos(phi), b = r * sin(phi);
+    float s = 0.5f * (1.0f + vh.z);
+    b = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - a * a)) + s * b;
+    float3 nh = a * t1 + b * t2 + sqrt(fmax(0.0f, 1.0f - a * a - b * b)) * vh;
+    float3 ne = (float3)(alpha * nh.x, alpha * nh.y, fmax(nh.z, 0.0f));
+    float len = length(ne);
+    return len > 0.0f ? ne / len : (float3)(0.0f, 0.0f, 1.0f);
+}
+
+/* Fresnel reflectance of a dielectric, eta = n_transmitted / n_incident
+ * (1 on total internal reflection), for |cos| to the microfacet normal. */
+inline float Microfacet_fresnel_dielectric(float cos_i, float eta) {
+    float c = fabs(cos_i);
+    float g = eta * eta - 1.0f + c * c;
+    if (g <= 0.0f) return 1.0f;
+    g = sqrt(g);
+    float a = (g - c) / (g + c);
+    float b = (c * (g + c) - 1.0f) / (c * (g - c) + 1.0f);
+    return 0.5f * a * a * (1.0f + b * b);
+}
+
+inline float Microfacet_f0(float eta) {
+    float r = (eta - 1.0f) / (eta + 1.0f);
+    return r * r;
+}
+
+/* Cycles' generalized Schlick with a negative exponent: the real
+ * dielectric curve remapped from [F0(eta), 1] to [f0, 1]. */
+inline float3 Microfacet_fresnel_remap(float3 f0, float cos_i, float eta) {
+    float real0 = Microfacet_f0(eta);
+    float s = clamp((Microfacet_fresnel_dielectric(cos_i, eta) - real0) / fmax(1.0f - real0, 1e-7f), 0.0f, 1.0f);
+    return mix(f0, (float3)(1.0f), s);
+}
+
+/* Cycles' F82-tint conductor: Schlick from f0 minus b mu (1 - mu)^6. */
+inline float3 Microfacet_fresnel_f82(float3 f0, float3 b, float cos_i) {
+    float m = clamp(1.0f - cos_i, 0.0f, 1.0f);
+    float m5 = (m * m) * (m * m) * m;
+    return clamp(mix(f0, (float3)(1.0f), m5) - b * (cos_i * m5 * m), 0.0f, 1.0f);
+}
+
+/* Table lookups: grid points i / (N - 1), clamped at the ends. */
+inline float Microfacet_lerp_index(float x, int n, int *i) {
+    float f = clamp(x, 0.0f, 1.0f) * (float)(n - 1);
+    *i = min((int)f, n - 2);
+    return f - (float)*i;
+}
+
+/* E(rough, mu): single-scattering albedo with Fresnel 1. */
+inline float Microfacet_E(float rough, float mu) {
+    int i, j;
+    float fr = Microfacet_lerp_index(rough, MICROFACET_E_SIZE, &i);
+    float fm = Microfacet_lerp_index(mu, MICROFACET_E_SIZE, &j);
+    __constant float *row0 = Microfacet_table_E + i * MICROFACET_E_SIZE, *row1 = row0 + MICROFACET_E_SIZE;
+    float a = mix(row0[j], row0[j + 1], fm), b = mix(row1[j], row1[j + 1], fm);
+    return fmax(mix(a, b, fr), 1e-4f);
+}
+
+inline float Microfacet_E_avg(float rough) {
+    int i;
+    float f = Microfacet_lerp_index(rough, MICROFACET_E_SIZE, &i);
+    return mix(Microfacet_table_E_avg[i], Microfacet_table_E_avg[i + 1], f);
+}
+
+/* S(rough, mu, eta): the lobe's mean Fresnel remap over E. */
+inline float Microfacet_S(float rough, float mu, float eta) {
+    float z = sqrt(fabs((eta - 1.0f) / (eta + 1.0f)));
+    int i, j, k;
+    float fz = Microfacet_lerp_index(z, MICROFACET_S_SIZE, &i);
+    float fm = Microfacet_lerp_index(mu, MICROFACET_S_SIZE, &j);
+    float fr = Microfacet_lerp_index(rough, MICROFACET_S_SIZE, &k);
+    float v[2];
+    for (int dz = 0; dz < 2; ++dz) {
+        __constant float *p = Microfacet_table_S + ((i + dz) * MICROFACET_S_SIZE + j) * MICROFACET_S_SIZE + k;
+        float a = mix(p[0], p[1], fr), b = mix(p[MICROFACET_S_SIZE], p[MICROFACET_S_SIZE + 1], fr);
+        v[dz] = mix(a, b, fm);
+    }
+    return mix(v[0], v[1], fz);
+}
+
+/* Multiscatter GGX as Cycles adds it to a reflection lobe: the factor on
+ * the single-scattering lobe, 1 + F_ms (1 - E) / E, with F_ms from the
+ * lobe's hemispherical mean Fresnel f_ss (Kulla and Conty 2017). */
+inline float3 Microfacet_multiscatter(float rough, float mu, float3 f_ss) {
+    float e = Microfacet_E(rough, mu), e_avg = Microfacet_E_avg(rough);
+    float3 f_ms = f_ss * e_avg / ((float3)(1.0f) - f_ss * (1.0f - e_avg));
+    return (float3)(1.0f) + f_ms * ((1.0f - e) / e);
+}
+
+/* Reflection off the microfacets: f cos_i (Fresnel left out) and the
+ * pdf of sampling wi by the visible normals; wo.z, wi.z > 0. */
+inline float Microfacet_reflect_eval(float alpha2, float3 wo, float3 wi, float *pdf) {
+    float3 h = normalize(wo + wi);
+    float d = Microfacet_D(alpha2, h.z);
+    float lo = Microfacet_lambda(alpha2, wo.z), li = Microfacet_lambda(alpha2, wi.z);
+    float common = d / (4.0f * wo.z);
+    *pdf = common / (1.0f + lo);
+    return common / (1.0f + lo + li);
+}
+
+/* Refraction through the microfacets (eta = n_t / n_i, wi.z < 0): f |cos_i|
+ * (Fresnel left out), its pdf by the visible normals, and the microfacet
+ * normal in *h (facing wo). False where no refraction joins wo and wi. */
+inline bool Microfacet_refract_eval(float alpha2, float eta, float3 wo, float3 wi, float *value, float *pdf,
+                                    float3 *h_out) {
+    float3 h = -(eta * wi + wo);
+    float len = length(h);
+    if (!(len > 0.0f)) return false;
+    h /= len;
+    if (h.z < 0.0f) h = -h;
+    float c_o = dot(h, wo), c_i = dot(h, wi);
+    if (!(c_o > 0.0f && c_i < 0.0f)) return false;
+    float d = Microfacet_D(alpha2, h.z);
+    float lo = Microfacet_lambda(alpha2, wo.z), li = Microfacet_lambda(alpha2, wi.z);
+    float common = d / wo.z * (eta * eta * fabs(c_o * c_i)) / (len * len);
+    *pdf = common / (1.0f + lo);
+    *value = common / (1.0f + lo + li);
+    *h_out = h;
+    return true;
+}
+
+/* The refraction of wo by the microfacet normal h (cos_o = wo.h > 0, eta =
+ * n_t / n_i); false on total internal reflection. */
+inline bool Microfacet_refract(float3 wo, float3 h, float eta, float3 *wi) {
+    float c = dot(wo, h);
+    float g = 1.0f - (1.0f - c * c) / (eta * eta);
+    if (g <= 0.0f) return false;
+    *wi = normalize((c / eta - sqrt(g)) * h - wo / eta);
+    return true;
+}
+
+#endif

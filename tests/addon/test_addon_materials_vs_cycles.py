@@ -1,0 +1,141 @@
+"""Materials as Cycles renders them: a smooth sphere of each Principled
+setting (rough metals and plastics, the specular layer, rough glass) and
+the Glossy and Glass nodes, under a small point light and under a uniform
+world, rendered by Cycles and by GPU GI's path tracer in the same process.
+
+Image means agree within 3% per channel; the per-pixel error on display
+values (Reinhard, then sRGB) stays within DISPLAY_TOLERANCE, which covers
+the two renders' noise at these sample counts (two Cycles renders with
+different seeds differ by up to half of it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import render_to_array
+
+from blender_addon.final import LAST_RUN
+
+SIZE = 48
+CYCLES_SAMPLES, GPUGI_SAMPLES = 512, 256
+MEAN_TOLERANCE = 0.03
+DISPLAY_TOLERANCE = 0.06  # relative RMSE of display values
+
+# name -> Principled inputs (or a shader node and its inputs)
+MATERIALS = {
+    **{f"plastic_r{r}": dict(roughness=r) for r in (0.05, 0.3, 0.7, 1.0)},
+    **{f"metal_r{r}": dict(metallic=1.0, roughness=r) for r in (0.05, 0.3, 0.7, 1.0)},
+    "glass_r0.1": dict(transmission=1.0, roughness=0.1),
+    "glass_r0.5": dict(transmission=1.0, roughness=0.5),
+    **{f"specular_{level}": {"roughness": 0.4, "Specular IOR Level": level} for level in (0.0, 0.5, 1.0)},
+    "glossy_node": dict(node="ShaderNodeBsdfGlossy", roughness=0.3),
+    "glass_node": dict(node="ShaderNodeBsdfGlass", roughness=0.2),
+}
+BASE = (0.8, 0.45, 0.2, 1.0)
+
+
+def _material(bpy, name, spec):
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    spec = dict(spec)
+    node_kind = spec.pop("node", None)
+    if node_kind is None:
+        node = tree.nodes["Principled BSDF"]
+        node.inputs["Base Color"].default_value = BASE
+        for key, value in spec.items():
+            socket = {"roughness": "Roughness", "metallic": "Metallic", "transmission": "Transmission Weight"}.get(key, key)
+            node.inputs[socket].default_value = value
+        return mat
+    tree.nodes.clear()
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    node = tree.nodes.new(node_kind)
+    node.inputs["Color"].default_value = BASE
+    node.inputs["Roughness"].default_value = spec["roughness"]
+    tree.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _scene(bpy, material, lighting):
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=1.0)
+    sphere = bpy.context.object
+    bpy.ops.object.shade_smooth()
+    sphere.data.materials.append(_material(bpy, material, MATERIALS[material]))
+    cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    cam.location, cam.rotation_euler = (0.0, -4.0, 0.0), (np.pi / 2, 0.0, 0.0)
+    cam.data.lens = 60.0
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    world = bpy.data.worlds.new("world")
+    background = world.node_tree.nodes["Background"]
+    if lighting == "point":
+        light = bpy.data.objects.new("light", bpy.data.lights.new("light", "POINT"))
+        light.data.energy, light.data.shadow_soft_size = 200.0, 0.1
+        light.location = (1.5, -2.5, 2.0)
+        scene.collection.objects.link(light)
+        background.inputs["Strength"].default_value = 0.0
+    else:
+        background.inputs["Color"].default_value = (0.6, 0.7, 0.9, 1.0)
+        background.inputs["Strength"].default_value = 1.0
+        # a floor below gives the world something to be reflected against
+        bpy.ops.mesh.primitive_plane_add(size=20.0, location=(0.0, 0.0, -1.0))
+        floor = bpy.data.materials.new("floor")
+        floor.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+        floor.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+        bpy.context.object.data.materials.append(floor)
+    scene.world = world
+    render = scene.render
+    render.resolution_x = render.resolution_y = SIZE
+    render.resolution_percentage = 100
+    cycles = scene.cycles
+    cycles.device, cycles.samples = "CPU", CYCLES_SAMPLES
+    cycles.use_adaptive_sampling = cycles.use_denoising = False
+    cycles.max_bounces, cycles.diffuse_bounces, cycles.glossy_bounces = 8, 1, 8
+    cycles.transmission_bounces, cycles.transparent_max_bounces = 8, 8
+    cycles.blur_glossy, cycles.sample_clamp_direct, cycles.sample_clamp_indirect = 0.0, 0.0, 0.0
+    cycles.pixel_filter_type, cycles.filter_width = "BOX", 1.0
+    gpugi = scene.gpugi
+    gpugi.mode, gpugi.samples, gpugi.denoise = "REFERENCE", GPUGI_SAMPLES, False
+    gpugi.diffuse_bounces, gpugi.max_bounces = 1, 8
+    gpugi.clamp = 0.0
+    return scene
+
+
+def display(linear: np.ndarray) -> np.ndarray:
+    y = np.clip(linear, 0.0, None)
+    y = y / (1.0 + y)
+    return np.where(y <= 0.0031308, 12.92 * y, 1.055 * np.power(y, 1 / 2.4) - 0.055)
+
+
+def compare(bpy, tmp_path, material, lighting) -> tuple[np.ndarray, float]:
+    """Per-channel mean ratio GPU GI / Cycles and the display RMSE."""
+    scene = _scene(bpy, material, lighting)
+    ours = render_to_array(bpy, scene, "GPUGI", str(tmp_path / "gpugi.exr"))[..., :3].astype(np.float64)
+    assert not LAST_RUN.get("error") and not LAST_RUN.get("warnings"), LAST_RUN
+    theirs = render_to_array(bpy, scene, "CYCLES", str(tmp_path / "cycles.exr"))[..., :3].astype(np.float64)
+    assert np.isfinite(ours).all()
+    a, b = display(ours), display(theirs)
+    return ours.mean(axis=(0, 1)) / theirs.mean(axis=(0, 1)), float(np.sqrt(((a - b) ** 2).mean()) / b.mean())
+
+
+# Known gaps (README, Looks and units), measured: rough glass loses the light
+# Cycles' glass Multiscatter tables give back (mean 0.69-0.94 of Cycles under the
+# point light, 0.91-0.98 under the world at roughness 0.5), and the point light
+# seen through glass or in a near-mirror highlight (roughness 0.05) is a
+# caustic that the two renderers' samples disagree on pixel by pixel.
+KNOWN_GAPS = {("glass_r0.1", "point"), ("glass_r0.5", "point"), ("glass_r0.5", "world"), ("glass_node", "point"),
+              ("metal_r0.05", "point"), ("plastic_r0.05", "point")}
+CASES = [pytest.param(material, lighting, marks=pytest.mark.xfail(strict=True, reason="known gap"))
+         if (material, lighting) in KNOWN_GAPS else (material, lighting)
+         for material in MATERIALS for lighting in ("point", "world")]
+
+
+@pytest.mark.cycles
+@pytest.mark.slow
+@pytest.mark.parametrize("material, lighting", CASES)
+def test_sphere_material_matches_cycles(bpy_empty, tmp_path, material, lighting):
+    ratio, error = compare(bpy_empty, tmp_path, material, lighting)
+    print(f"{material} {lighting}: mean ratio {np.round(ratio, 3)}, display RMSE {error:.3f}")
+    np.testing.assert_allclose(ratio, 1.0, atol=MEAN_TOLERANCE)
+    assert error < DISPLAY_TOLERANCE
