@@ -21,7 +21,6 @@
 
 #define IMAGE_MAX_PASSTHROUGH 64
 #define IMAGE_ALL_LIGHTS 4 /* up to this many lights, every one gets a shadow ray */
-#define LIGHT_WORLD_ROW -1 /* a stand-in light row: the world's light */
 
 /* A path's light is summed per light pass only where the render asks for
  * the passes (IMAGE_LIGHT_PASSES); else in one sum, Combined, which keeps
@@ -101,32 +100,38 @@ inline float Image_light_rate(const SceneView *sc, int i) {
     return sc->lights[i].pick - (i > 0 ? sc->lights[i - 1].pick : 0.0f);
 }
 
-/* Light from one sample of light l at a scattering point, through the
- * BSDF f, weighted against BSDF sampling; `rate`: the light's shadow rays
- * per round x rounds. The light is sampled from the origin of the shadow
- * ray, just above the surface (so the ray ends at the sampled point), or
- * just below it where the light lies behind (transmission through rough
- * glass). Adds the diffuse and glossy parts of f's response. */
-inline void Image_light_sample(const SceneView *sc, const Bsdf *f, const SurfacePoint *sp, const Light *l,
-                               float3 u, float value_scale, float rate, float3 *diffuse, float3 *glossy) {
+/* Light of sample ls, taken from the shadow ray's origin org, through the
+ * BSDF f and weighted against BSDF sampling (`rate`: the light's shadow
+ * rays per round x rounds; `scale` on its value). Adds the diffuse and
+ * glossy parts of f's response. */
+inline void Image_shadow_ray(const SceneView *sc, const Bsdf *f, float3 org, const LightSample *ls, float scale,
+                             float rate, float3 *diffuse, float3 *glossy) {
+    if (!(ls->value.x > 0.0f || ls->value.y > 0.0f || ls->value.z > 0.0f) || !(ls->dist > 0.0f)) return;
+    float3 d;
+    float pdf;
+    float3 g = Bsdf_eval(f, Bsdf_to_local(f, ls->dir), &d, &pdf);
+    if (!(d.x > 0.0f || d.y > 0.0f || d.z > 0.0f || g.x > 0.0f || g.y > 0.0f || g.z > 0.0f)) return;
+    float w = ls->pdf > 0.0f ? Image_mis(ls->pdf * rate, pdf) : 1.0f;
+    float3 arriving = ls->value * (scale * w * Image_visibility(sc, org, ls->dir, ls->dist));
+    *diffuse += d * arriving;
+    *glossy += g * arriving;
+}
+
+/* One sample of light l at a scattering point (u: its random numbers).
+ * The light is sampled from the shadow ray's origin, just above the
+ * surface (so the ray ends at the sampled point), or just below it where
+ * the light lies behind (transmission through rough glass). */
+inline void Image_light_sample(const SceneView *sc, const Bsdf *f, const SurfacePoint *sp, const Light *l, float3 u,
+                               float scale, float rate, float3 *diffuse, float3 *glossy) {
     float3 org = sp->p + sp->eps * sp->ng;
-    LightSample ls = l->kind == LIGHT_WORLD_ROW ? Light_sample_world(sc->world.xyz, sp->ns, u.y, u.z)
-                                                : Light_sample(l, &sc->em, org, u.x, u.y, u.z);
+    LightSample ls = Light_sample(l, &sc->em, org, u.x, u.y, u.z);
     if (dot(ls.dir, sp->ng) < 0.0f) {
-        if (!(f->w_glass > 0.0f) || l->kind == LIGHT_WORLD_ROW) return;
+        if (!(f->w_glass > 0.0f)) return;
         org = sp->p - sp->eps * sp->ng;
         ls = Light_sample(l, &sc->em, org, u.x, u.y, u.z);
         if (dot(ls.dir, sp->ng) >= 0.0f) return;
     }
-    if (!(ls.value.x > 0.0f || ls.value.y > 0.0f || ls.value.z > 0.0f) || !(ls.dist > 0.0f)) return;
-    float3 d;
-    float pdf;
-    float3 g = Bsdf_eval(f, Bsdf_to_local(f, ls.dir), &d, &pdf);
-    if (!(d.x > 0.0f || d.y > 0.0f || d.z > 0.0f || g.x > 0.0f || g.y > 0.0f || g.z > 0.0f)) return;
-    float w = ls.pdf > 0.0f ? Image_mis(ls.pdf * rate, pdf) : 1.0f;
-    float3 arriving = ls.value * (value_scale * w * Image_visibility(sc, org, ls.dir, ls.dist));
-    *diffuse += d * arriving;
-    *glossy += g * arriving;
+    Image_shadow_ray(sc, f, org, &ls, scale, rate, diffuse, glossy);
 }
 
 /* Direct light at a scattering point, world included: light_samples
@@ -153,9 +158,9 @@ inline void Image_direct(const SceneView *sc, const Bsdf *f, const SurfacePoint 
             if (p > 0.0f) Image_light_sample(sc, f, sp, &l, u, 1.0f / p, rounds * p, diffuse, glossy);
         }
         if (has_world) {
-            Light world = {.kind = LIGHT_WORLD_ROW};
-            float3 u = (float3)(0.0f, Rng_next(rng), Rng_next(rng));
-            Image_light_sample(sc, f, sp, &world, u, 1.0f, rounds, diffuse, glossy);
+            LightSample ls = Light_sample_world(sc->world.xyz, sp->ns, Rng_next(rng), Rng_next(rng));
+            if (dot(ls.dir, sp->ng) >= 0.0f)
+                Image_shadow_ray(sc, f, sp->p + sp->eps * sp->ng, &ls, 1.0f, rounds, diffuse, glossy);
         }
     }
     *diffuse /= rounds;
@@ -270,15 +275,13 @@ inline float3 Image_lights_seen(const SceneView *sc, const ImageState *st, int l
 }
 
 /* Weight of an emissive triangle's light reached by the path's last ray
- * (its hit at distance t), against the mesh light's sampler. */
+ * (its hit at distance t), against the mesh light's sampler (the last
+ * light row, scene/tables.py). */
 inline float Image_mesh_mis(const SceneView *sc, const ImageState *st, int light_samples, int tri, float t) {
-    if (!(st->pdf > 0.0f)) return 1.0f;
-    for (int i = 0; i < sc->light_count; ++i) {
-        if (sc->lights[i].kind != LIGHT_MESH) continue;
-        float rate = Image_light_rate(sc, i) * (float)light_samples;
-        return Image_mis(st->pdf, rate * Light_mesh_pdf(&sc->em, tri, st->dir, t));
-    }
-    return 1.0f;
+    int i = sc->light_count - 1;
+    if (!(st->pdf > 0.0f) || i < 0 || sc->lights[i].kind != LIGHT_MESH) return 1.0f;
+    float rate = Image_light_rate(sc, i) * (float)light_samples;
+    return Image_mis(st->pdf, rate * Light_mesh_pdf(&sc->em, tri, st->dir, t));
 }
 
 /* The lobes the path may sample next: diffuse ones while diffuse bounces
@@ -324,10 +327,9 @@ inline bool Image_scatter(const SceneView *sc, const Camera *cam, const ImageJob
 #ifdef IMAGE_GLOSSY_CUT
     if (st->smooth > 0 && diffuse_light) {
         /* after a glossy bounce: the diffuse lobe's light, direct included, from the cut */
-        float3 e = CutLookup_irradiance(&gi->cut, sp->p, sp->ns);
-        e = (float3)(isfinite(e.x) ? e.x : 0.0f, isfinite(e.y) ? e.y : 0.0f, isfinite(e.z) ? e.z : 0.0f);
-        Image_add(path->light, st->throughput * f.diffuse * (1.0f / PI_F) * fmax(e, (float3)(0.0f)), st->first_pass,
-                  st->bounces + 2, false, false);
+        float3 e = CutLookup_light(&gi->cut, sp->p, sp->ns);
+        Image_add(path->light, st->throughput * f.diffuse * (1.0f / PI_F) * e, st->first_pass, st->bounces + 2, false,
+                  false);
         f.diffuse = (float3)(0.0f);
     }
 #endif

@@ -52,4 +52,12 @@ inline float3 CutLookup_irradiance(const Cut *cut, float3 y, float3 n_y) {
     return nearest_facing >= 0 ? cut->irradiance[nearest_facing].xyz : none;
 }
 
+/* The irradiance as a light estimate: non-finite parts 0, never negative
+ * (gather rays and the image's glossy paths). */
+inline float3 CutLookup_light(const Cut *cut, float3 y, float3 n_y) {
+    float3 e = CutLookup_irradiance(cut, y, n_y);
+    e = (float3)(isfinite(e.x) ? e.x : 0.0f, isfinite(e.y) ? e.y : 0.0f, isfinite(e.z) ? e.z : 0.0f);
+    return fmax(e, (float3)(0.0f));
+}
+
 #endif

@@ -60,9 +60,7 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
         if (f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f) {
             /* a diffuse lobe: its light from the cut */
             *distance = first_t;
-            float3 e = CutLookup_irradiance(cut, sp.p, sp.ns);
-            e = (float3)(isfinite(e.x) ? e.x : 0.0f, isfinite(e.y) ? e.y : 0.0f, isfinite(e.z) ? e.z : 0.0f);
-            sum += throughput * f.diffuse * m.base_color.w * fmax(e, (float3)(0.0f));
+            sum += throughput * f.diffuse * m.base_color.w * CutLookup_light(cut, sp.p, sp.ns);
         }
         /* the other lobes carry the ray on */
         float3 wi, weight;

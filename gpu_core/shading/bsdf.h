@@ -70,8 +70,7 @@ inline float3 Bsdf_metal_fresnel(const Bsdf *f, float cos_i) {
 
 /* Glass: reflected and transmitted parts of the Fresnel at cos to h. */
 inline void Bsdf_glass_fresnel(const Bsdf *f, float cos_i, float3 *r, float3 *t) {
-    float3 fr = Microfacet_fresnel_remap(f->glass_f0, cos_i, f->glass_eta);
-    if (Microfacet_fresnel_dielectric(cos_i, f->glass_eta) >= 1.0f) fr = (float3)(1.0f); /* total internal reflection */
+    float3 fr = Microfacet_fresnel_remap(f->glass_f0, cos_i, f->glass_eta); /* 1 on total internal reflection */
     *r = fr * f->glass_rtint;
     *t = ((float3)(1.0f) - fr) * f->glass_ttint;
 }
@@ -117,7 +116,7 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
         f.metal_b = mix(cc, one, x5) * (7.0f / (x5 * x)) * (one - fmin(tint, one));
         f_ss = mix(cc, one, 1.0f / 21.0f) - f.metal_b * (1.0f / 126.0f);
     }
-    f.metal_ms = Microfacet_multiscatter(f.rough, mu, clamp(f_ss, 0.0f, 1.0f));
+    f.metal_ms = f.w_metal > 0.0f ? Microfacet_multiscatter(f.rough, mu, clamp(f_ss, 0.0f, 1.0f)) : one;
     /* glass */
     f.glass_eta = entering ? m->ior : 1.0f / m->ior;
     bool glass_node = m->shader == MATERIAL_GLASS;
@@ -127,22 +126,28 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     /* the specular layer and what it leaves the diffuse base */
     f.spec_eta = m->specular_tint.w;
     f.spec_f0 = fmin((float3)(Microfacet_f0(f.spec_eta)) * tint, one);
-    f.spec_ms = Microfacet_multiscatter(f.rough, mu, m->specular_fss.xyz);
     if (fabs(f.spec_eta - 1.0f) < 1e-5f) f.w_specular = 0.0f;
+    f.spec_ms = one;
     float layer = 1.0f;
     if (f.w_specular > 0.0f) {
+        f.spec_ms = Microfacet_multiscatter(f.rough, mu, m->specular_fss.xyz);
         float3 albedo = Microfacet_E(f.rough, mu) * f.spec_ms * mix(f.spec_f0, one, Microfacet_S(f.rough, mu, f.spec_eta));
         layer = clamp(1.0f - fmax(fmax(albedo.x, albedo.y), albedo.z), 0.0f, 1.0f);
     }
     f.diffuse = m->shader == MATERIAL_PRINCIPLED ? c * ((1.0f - metallic) * (1.0f - transmission) * layer) : (float3)(0.0f);
     /* sampling weights: each lobe's albedo, estimated at the normal */
-    float3 gr, gt;
-    Bsdf_glass_fresnel(&f, mu, &gr, &gt);
-    float glossy = (sample & BSDF_SAMPLE_GLOSSY) ? 1.0f : 0.0f;
-    f.q[BSDF_DIFFUSE] = (sample & BSDF_SAMPLE_DIFFUSE) ? Bsdf_avg(f.diffuse) : 0.0f;
-    f.q[BSDF_SPECULAR] = glossy * f.w_specular * Bsdf_avg(Microfacet_fresnel_remap(f.spec_f0, mu, f.spec_eta));
-    f.q[BSDF_METAL] = glossy * f.w_metal * Bsdf_avg(Bsdf_metal_fresnel(&f, mu));
-    f.q[BSDF_GLASS] = glossy * f.w_glass * Bsdf_avg(gr + gt);
+    for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = 0.0f;
+    if (sample & BSDF_SAMPLE_DIFFUSE) f.q[BSDF_DIFFUSE] = Bsdf_avg(f.diffuse);
+    if (sample & BSDF_SAMPLE_GLOSSY) {
+        if (f.w_specular > 0.0f)
+            f.q[BSDF_SPECULAR] = f.w_specular * Bsdf_avg(Microfacet_fresnel_remap(f.spec_f0, mu, f.spec_eta));
+        if (f.w_metal > 0.0f) f.q[BSDF_METAL] = f.w_metal * Bsdf_avg(Bsdf_metal_fresnel(&f, mu));
+        if (f.w_glass > 0.0f) {
+            float3 gr, gt;
+            Bsdf_glass_fresnel(&f, mu, &gr, &gt);
+            f.q[BSDF_GLASS] = f.w_glass * Bsdf_avg(gr + gt);
+        }
+    }
     float total = f.q[0] + f.q[1] + f.q[2] + f.q[3];
     for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = total > 0.0f ? f.q[i] / total : 0.0f;
     return f;
