@@ -404,7 +404,7 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
         }
         SurfacePoint sp = Surface_at(sc, st.dir, &hit);
         Material m = sc->materials[sp.material];
-        float3 base = Surface_base(sc, &m, sp.uv);
+        float3 base = Surface_textured(sc, &m, &sp);
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(rng) >= m.base_color.w && st.passes < IMAGE_MAX_PASSTHROUGH) {
             st.passes++;

@@ -3,8 +3,10 @@
 Supported: Principled BSDF (Base Color, Metallic, Roughness, Transmission
 Weight, IOR, Specular IOR Level, Specular Tint, Emission Color x Strength,
 Alpha), Diffuse, Glossy, Glass and Emission shaders, Add and Mix Shader over them (emission is summed, the
-surface is the dominant shader), and an Image Texture on Base Color or
-Color. Anything else falls back to a default value and is named in the
+surface is the dominant shader), an Image Texture on Base Color or
+Color, on Roughness or Metallic (its Color as luminance, its Alpha, or a
+channel through Separate Color), and a tangent-space Normal Map node with
+an Image Texture on the shaders' Normal. Anything else falls back to a default value and is named in the
 warnings; nothing here raises on an unexpected node tree.
 """
 
@@ -12,12 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpu_core.scene import MATERIAL_GLASS, MATERIAL_GLOSSY
+from gpu_core.scene import MATERIAL_GLASS, MATERIAL_GLOSSY, TEXTURE_LUMINANCE
 
 DEFAULT_ROW = {"base_color": (0.8, 0.8, 0.8), "roughness": 0.5}
 BLACK = (0.0, 0.0, 0.0)
 _GLOSSY = ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic")
 _SRGB_SPACES = ("sRGB", "sRGB EOTF")
+# Separate Color (and the older Separate RGB) between an Image Texture and a value socket: output -> channel
+_SEPARATE_NODES = ("ShaderNodeSeparateColor", "ShaderNodeSeparateRGB")
+_SEPARATE_CHANNELS = {"Red": 0, "Green": 1, "Blue": 2, "R": 0, "G": 1, "B": 2}
 # Principled layers the renderer has no model for, with the input that switches them on
 _PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
                            ("Anisotropic", "anisotropy"))
@@ -104,7 +109,7 @@ class MaterialTable:
         if kind == "ShaderNodeBsdfPrincipled":
             return self._principled(name, node)
         if kind == "ShaderNodeBsdfDiffuse":
-            return {**self._color(name, node.inputs["Color"]), "roughness": 1.0}
+            return {**self._color(name, node.inputs["Color"]), "roughness": 1.0, **self._normal(name, node)}
         if kind in _GLOSSY:
             anisotropy = node.inputs.get("Anisotropy")
             if anisotropy is not None and (anisotropy.is_linked or anisotropy.default_value != 0.0):
@@ -113,15 +118,17 @@ class MaterialTable:
                 **self._color(name, node.inputs["Color"]),
                 "shader": MATERIAL_GLOSSY,
                 "metallic": 1.0,
-                "roughness": self._value(name, node.inputs["Roughness"]),
+                **self._texture_value(name, node.inputs["Roughness"], "roughness"),
+                **self._normal(name, node),
             }
         if kind == "ShaderNodeBsdfGlass":
             return {
                 **self._color(name, node.inputs["Color"]),
                 "shader": MATERIAL_GLASS,
                 "transmission": 1.0,
-                "roughness": self._value(name, node.inputs["Roughness"]),
+                **self._texture_value(name, node.inputs["Roughness"], "roughness"),
                 "ior": self._value(name, node.inputs["IOR"]),
+                **self._normal(name, node),
             }
         if kind == "ShaderNodeEmission":
             color = np.array(self._color_value(name, node.inputs["Color"])) * self._value(name, node.inputs["Strength"])
@@ -140,8 +147,9 @@ class MaterialTable:
                 self._warn(f"material '{name}': the Principled BSDF {layer} layer is not supported; left out")
         return {
             **self._color(name, inputs["Base Color"]),
-            "metallic": self._value(name, inputs["Metallic"]),
-            "roughness": self._value(name, inputs["Roughness"]),
+            **self._texture_value(name, inputs["Metallic"], "metallic"),
+            **self._texture_value(name, inputs["Roughness"], "roughness"),
+            **self._normal(name, node),
             "transmission": self._value(name, inputs["Transmission Weight"]),
             "ior": self._value(name, inputs["IOR"]),
             "specular_ior_level": self._value(name, inputs["Specular IOR Level"]),
@@ -190,6 +198,58 @@ class MaterialTable:
                 return {"base_color": (1.0, 1.0, 1.0), "texture_id": texture}
             return {"base_color": tuple(float(c) for c in socket.default_value[:3])}
         return {"base_color": tuple(self._color_value(name, socket))}
+
+    def _texture_value(self, name: str, socket, key: str) -> dict:
+        """Row fields of a value socket (``key``: roughness or metallic): an
+        Image Texture on it, directly (its Color as luminance, or its Alpha)
+        or through a Separate Color node (one channel), becomes the row's
+        ``key``_texture and ``key``_channel; anything else its value."""
+        node, output = _link_source(socket)
+        channel = None
+        if node is not None and node.bl_idname in _SEPARATE_NODES and output is not None:
+            channel = _SEPARATE_CHANNELS.get(output.name)
+            if node.bl_idname == "ShaderNodeSeparateColor" and node.mode != "RGB":
+                channel = None
+            node, output = _link_source(node.inputs[0]) if channel is not None else (None, None)
+        if node is not None and node.bl_idname == "ShaderNodeTexImage" and output is not None:
+            if output.name == "Alpha":
+                channel = 3 if channel is None else None
+            elif channel is None:
+                channel = TEXTURE_LUMINANCE
+            texture = self._texture(name, node) if channel is not None else -1
+            if texture >= 0:
+                return {key: float(socket.default_value), f"{key}_texture": texture, f"{key}_channel": channel}
+        return {key: self._value(name, socket)}
+
+    def _normal(self, name: str, node) -> dict:
+        """Row fields of a shader's Normal input: a Normal Map node in
+        tangent space with an Image Texture on its Color becomes the row's
+        normal map; other links are named in the warnings."""
+        socket = node.inputs.get("Normal")
+        if socket is None or not socket.is_linked:
+            return {}
+        source = _linked_node(socket)
+        if source is None:
+            return {}
+        if source.bl_idname != "ShaderNodeNormalMap":
+            self._warn(f"material '{name}': '{source.bl_idname}' on {node.name} > Normal is not supported; "
+                       "used the smooth normal")
+            return {}
+        if source.space != "TANGENT":
+            self._warn(f"material '{name}': {source.name} in {source.space.lower()} space is not supported; "
+                       "used the smooth normal")
+            return {}
+        if source.uv_map:
+            self._warn(f"material '{name}': {source.name} names the UV map '{source.uv_map}'; used the active one")
+        image = _linked_node(source.inputs["Color"])
+        if image is None or image.bl_idname != "ShaderNodeTexImage":
+            if source.inputs["Color"].is_linked:
+                self._warn_link(name, source.inputs["Color"])
+            return {}
+        texture = self._texture(name, image)
+        if texture < 0:
+            return {}
+        return {"normal_texture": texture, "normal_strength": self._value(name, source.inputs["Strength"])}
 
     def _color_value(self, name: str, socket) -> list[float]:
         if socket.is_linked:
@@ -265,14 +325,20 @@ def _output_node(tree):
 
 def _linked_node(socket):
     """The node feeding ``socket``, through reroutes and muted links; None if unlinked."""
+    return _link_source(socket)[0]
+
+
+def _link_source(socket):
+    """(node, output socket) feeding ``socket``, through reroutes; (None,
+    None) if unlinked, muted or invalid."""
     seen = 0
     while socket.is_linked and seen < 64:
         link = socket.links[0]
         if link.is_muted or not link.is_valid:
-            return None
+            return None, None
         node = link.from_node
         if node.bl_idname != "NodeReroute":
-            return None if node.mute else node
+            return (None, None) if node.mute else (node, link.from_socket)
         socket = node.inputs[0]
         seen += 1
-    return None
+    return None, None

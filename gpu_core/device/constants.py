@@ -32,6 +32,9 @@ MATERIAL_GLASS = 2
 # photons it scatters are caustic photons (the caustic map) and its camera
 # paths are followed as specular ones; above it, its light is glossy.
 CAUSTIC_ROUGHNESS = 0.1
+# a texture channel read by a value socket (Roughness, Metallic): 0-3 one of
+# r, g, b, a, or the colour's luminance (Blender's colour-to-value conversion)
+TEXTURE_LUMINANCE = 4
 
 # cameras (shading/camera.h)
 CAMERA_PERSP = 0

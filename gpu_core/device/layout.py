@@ -79,9 +79,14 @@ MATERIAL = Struct("Material", "a material row (shading/bsdf.h)", [
     ("roughness", "float"),
     ("transmission", "float"),
     ("ior", "float"),
-    ("texture", "int", "index into the texture table, -1 for none"),
+    ("texture", "int", "Base Color's texture: index into the texture table, -1 for none"),
     ("shader", "int", "MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS"),
-    ("pad", "int", "", 2),
+    ("roughness_texture", "int", "Roughness's texture, -1 for none"),
+    ("roughness_channel", "int", "its channel: 0-3 r, g, b, a; TEXTURE_LUMINANCE"),
+    ("metallic_texture", "int", "Metallic's texture, -1 for none"),
+    ("metallic_channel", "int", "its channel, as roughness_channel"),
+    ("normal_texture", "int", "a tangent-space normal map, -1 for none"),
+    ("normal_strength", "float", "the Normal Map node's Strength"),
 ])
 
 LIGHT = Struct("Light", "a light row; derived values are computed on the host in float64", [

@@ -56,7 +56,8 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
         SurfacePoint sp = Surface_at(sc, dir, &hit);
         Material m = sc->materials[sp.material];
         if (rough) sum += throughput * PI_F * m.emission.xyz;
-        Bsdf f = Surface_bsdf(&sp, &m, Surface_base(sc, &m, sp.uv), dir, BSDF_SAMPLE_GLOSSY);
+        float3 base = Surface_textured(sc, &m, &sp);
+        Bsdf f = Surface_bsdf(&sp, &m, base, dir, BSDF_SAMPLE_GLOSSY);
         if (f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f) {
             /* a diffuse lobe: its light from the cut */
             *distance = first_t;

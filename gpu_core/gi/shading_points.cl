@@ -47,7 +47,8 @@ __kernel void ShadingPoints_trace(SCENE_PARAMS, const int4 window, const int sub
             tmax = RAY_FAR;
             continue;
         }
-        Bsdf f = Surface_bsdf(&sp, &m, Surface_base(&sc, &m, sp.uv), dir, BSDF_SAMPLE_ALL);
+        float3 base = Surface_textured(&sc, &m, &sp);
+        Bsdf f = Surface_bsdf(&sp, &m, base, dir, BSDF_SAMPLE_ALL);
         bool diffuse = f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f;
         float3 wi;
         if (Bsdf_has_smooth(&f) || bounces >= max_bounces || !Bsdf_likeliest(&f, &wi)) {

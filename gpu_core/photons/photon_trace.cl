@@ -84,7 +84,7 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
         hits++;
         SurfacePoint sp = Surface_at(&sc, dir, &hit);
         Material m = sc.materials[sp.material];
-        float3 base = Surface_base(&sc, &m, sp.uv);
+        float3 base = Surface_textured(&sc, &m, &sp);
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(&rng) >= m.base_color.w && passes < PHOTON_MAX_PASSTHROUGH) {
             passes++;

@@ -14,10 +14,11 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ..device.constants import (AREA_RECTANGLE, CAMERA_PERSP, CAUSTIC_ROUGHNESS, FILTER_BOX, LIGHT_POINT, LIGHT_SUN,
-                                MATERIAL_PRINCIPLED)
+                                MATERIAL_PRINCIPLED, TEXTURE_LUMINANCE)
 
 
-_SINGULAR_ROUGHNESS = 2e-10 ** 0.25  # roughness of MICROFACET_SINGULAR_ALPHA2 (alpha = roughness^2)
+_SINGULAR_ROUGHNESS = 2e-10 ** 0.25
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)  # shading/texture.h's Texture_value, Blender's linear Rec. 709  # roughness of MICROFACET_SINGULAR_ALPHA2 (alpha = roughness^2)
 
 
 @dataclass
@@ -38,7 +39,13 @@ class Materials:
     ior: np.ndarray  # (M,) float32
     emission: np.ndarray  # (M, 3) float32, colour x strength (radiance)
     alpha: np.ndarray  # (M,) float32
-    texture_id: np.ndarray  # (M,) int32 into Scene.textures, -1 for none
+    texture_id: np.ndarray  # (M,) int32 into Scene.textures, -1 for none: multiplies base_color
+    roughness_texture: np.ndarray  # (M,) int32, -1 for none: replaces roughness
+    roughness_channel: np.ndarray  # (M,) int32: 0-3 r, g, b, a; TEXTURE_LUMINANCE
+    metallic_texture: np.ndarray  # (M,) int32, -1 for none: replaces metallic
+    metallic_channel: np.ndarray  # (M,) int32, as roughness_channel
+    normal_texture: np.ndarray  # (M,) int32, -1 for none: a tangent-space normal map (Normal Map node)
+    normal_strength: np.ndarray  # (M,) float32: the Normal Map node's Strength
     specular_ior_level: np.ndarray  # (M,) float32: 0 no dielectric layer, 0.5 F0 of the IOR, 1 twice that
     specular_tint: np.ndarray  # (M, 3) float32: tints F0 of the dielectric layers, F82 of the metal
     shader: np.ndarray  # (M,) int32: MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS
@@ -56,6 +63,12 @@ class Materials:
             emission=(0.0, 0.0, 0.0),
             alpha=1.0,
             texture_id=-1,
+            roughness_texture=-1,
+            roughness_channel=TEXTURE_LUMINANCE,
+            metallic_texture=-1,
+            metallic_channel=TEXTURE_LUMINANCE,
+            normal_texture=-1,
+            normal_strength=1.0,
             specular_ior_level=0.0,
             specular_tint=(1.0, 1.0, 1.0),
             shader=MATERIAL_PRINCIPLED,
@@ -76,6 +89,12 @@ class Materials:
             emission=column("emission", np.float32, 3),
             alpha=column("alpha", np.float32),
             texture_id=column("texture_id", np.int32),
+            roughness_texture=column("roughness_texture", np.int32),
+            roughness_channel=column("roughness_channel", np.int32),
+            metallic_texture=column("metallic_texture", np.int32),
+            metallic_channel=column("metallic_channel", np.int32),
+            normal_texture=column("normal_texture", np.int32),
+            normal_strength=column("normal_strength", np.float32),
             specular_ior_level=column("specular_ior_level", np.float32),
             specular_tint=column("specular_tint", np.float32, 3),
             shader=column("shader", np.int32),
@@ -237,24 +256,42 @@ class Scene:
 
     def has_specular(self) -> bool:
         """Whether a triangle is near-specular metal or glass (roughness
-        below CAUSTIC_ROUGHNESS): specular paths and, where light reaches
-        them, caustics."""
+        below CAUSTIC_ROUGHNESS somewhere): specular paths and, where light
+        reaches them, caustics."""
         used, m = self.used_materials(), self.materials
-        smooth = np.nan_to_num(m.roughness[used], nan=0.5) < CAUSTIC_ROUGHNESS
-        return bool((smooth & ((m.metallic[used] > 0) | (m.transmission[used] > 0))).any())
+        roughness = self._value_range(m.roughness, m.roughness_texture, m.roughness_channel, used, 0.5)
+        metallic = self._value_range(m.metallic, m.metallic_texture, m.metallic_channel, used, 0.0)
+        smooth = roughness[0] < CAUSTIC_ROUGHNESS
+        return bool((smooth & ((metallic[1] > 0) | (m.transmission[used] > 0))).any())
 
     def has_glossy(self) -> bool:
         """Whether a triangle has a glossy lobe: metal, glass or a
         dielectric specular layer rougher than a mirror (alpha^2 above
-        shading/microfacet.h's MICROFACET_SINGULAR_ALPHA2)."""
+        shading/microfacet.h's MICROFACET_SINGULAR_ALPHA2) somewhere."""
         used, m = self.used_materials(), self.materials
-        rough = np.nan_to_num(m.roughness[used], nan=0.5) > _SINGULAR_ROUGHNESS
-        lobes = (m.metallic[used] > 0) | (m.transmission[used] > 0) | (m.specular_ior_level[used] > 0)
+        roughness = self._value_range(m.roughness, m.roughness_texture, m.roughness_channel, used, 0.5)
+        metallic = self._value_range(m.metallic, m.metallic_texture, m.metallic_channel, used, 0.0)
+        rough = roughness[1] > _SINGULAR_ROUGHNESS
+        lobes = (metallic[1] > 0) | (m.transmission[used] > 0) | (m.specular_ior_level[used] > 0)
         return bool((rough & lobes).any())
+
+    def _value_range(self, values, texture, channel, used, default) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of a material input over rows ``used``: its value, or
+        the range of its texture's channel where one is bound (clipped to
+        [0, 1] like the table's)."""
+        value = np.nan_to_num(values[used].astype(np.float64), nan=default)
+        low, high = value.copy(), value.copy()
+        for row, (tex, ch) in enumerate(zip(texture[used], channel[used])):
+            if 0 <= tex < len(self.textures):
+                texels = texture_channel(self.textures[tex], int(ch))
+                low[row], high[row] = np.clip([np.nanmin(texels), np.nanmax(texels)], 0.0, 1.0)
+        return low, high
 
     def has_textures(self) -> bool:
         """Whether a triangle's material reads a texture."""
-        return bool(self.textures) and bool((self.materials.texture_id[self.used_materials()] >= 0).any())
+        used, m = self.used_materials(), self.materials
+        bound = [m.texture_id[used], m.roughness_texture[used], m.metallic_texture[used], m.normal_texture[used]]
+        return bool(self.textures) and any(bool((ids >= 0).any()) for ids in bound)
 
     def has_alpha(self) -> bool:
         """Whether a triangle's material is see-through."""
@@ -269,6 +306,15 @@ class Scene:
         if pts is None or len(pts) == 0:
             return np.full(3, -1.0), np.full(3, 1.0)
         return pts.min(axis=0), pts.max(axis=0)
+
+
+def texture_channel(pixels: np.ndarray, channel: int) -> np.ndarray:
+    """The values a value socket reads from (H, W, 4) linear pixels: one
+    channel, or the colour's luminance (TEXTURE_LUMINANCE, Rec. 709
+    weights as Blender's colour-to-value conversion)."""
+    if channel == TEXTURE_LUMINANCE:
+        return pixels[..., :3] @ np.array(LUMINANCE_WEIGHTS, np.float32)
+    return pixels[..., min(max(channel, 0), 3)]
 
 
 # The parts of a scene an edit can change on its own; each is uploaded, and

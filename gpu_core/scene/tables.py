@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..device.constants import (AREA_ELLIPSE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN,
-                                MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_PRINCIPLED)
+                                MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_PRINCIPLED, TEXTURE_LUMINANCE)
 from ..device.layout import CAMERA_DTYPE, LIGHT_DTYPE, MATERIAL_DTYPE, TEXTURE_INFO_DTYPE
 from ..shading import microfacet_tables
 from .model import PARTS, Scene
@@ -77,7 +77,13 @@ def material_table(scene: Scene) -> np.ndarray:
         shader == MATERIAL_GLOSSY, 0.0, np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)))
     table["roughness"] = np.clip(np.nan_to_num(m.roughness), 0.0, 1.0)
     table["ior"] = np.clip(np.nan_to_num(m.ior, nan=1.5), 1e-3, 1e3)
-    table["texture"] = np.where(m.texture_id < len(scene.textures), m.texture_id, -1)
+    table["texture"] = _texture_index(m.texture_id, scene)
+    table["roughness_texture"] = _texture_index(m.roughness_texture, scene)
+    table["roughness_channel"] = np.clip(m.roughness_channel, 0, TEXTURE_LUMINANCE)
+    table["metallic_texture"] = np.where(shader == MATERIAL_PRINCIPLED, _texture_index(m.metallic_texture, scene), -1)
+    table["metallic_channel"] = np.clip(m.metallic_channel, 0, TEXTURE_LUMINANCE)
+    table["normal_texture"] = _texture_index(m.normal_texture, scene)
+    table["normal_strength"] = np.clip(np.nan_to_num(m.normal_strength, nan=1.0), 0.0, 1e3)
     level = np.where(shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.specular_ior_level), 0.0, 1e3), 0.0)
     tint = np.clip(np.nan_to_num(m.specular_tint, nan=1.0), 0.0, 1e3)
     table["specular_tint"][:, :3] = tint
@@ -86,6 +92,11 @@ def material_table(scene: Scene) -> np.ndarray:
         table["specular_tint"][row, 3] = eta
         table["specular_fss"][row, :3] = fss
     return table
+
+
+def _texture_index(ids: np.ndarray, scene: Scene) -> np.ndarray:
+    """Texture indices of a column, -1 where none or out of the table."""
+    return np.where((ids >= 0) & (ids < len(scene.textures)), ids, -1).astype(np.int32)
 
 
 def specular_layer(ior: float, level: float, tint) -> tuple[float, np.ndarray]:

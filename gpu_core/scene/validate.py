@@ -4,6 +4,8 @@ make an image)."""
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from ..errors import SceneError
@@ -159,8 +161,7 @@ def _shaped(array, shape, dtype) -> np.ndarray:
     return out
 
 
-_MATERIAL_FIELDS = ("base_color metallic roughness transmission ior emission alpha texture_id specular_ior_level "
-                    "specular_tint shader").split()
+_MATERIAL_FIELDS = [f.name for f in fields(Materials) if f.name != "names"]
 
 
 def _finite_materials(materials: Materials) -> tuple[Materials, list[str]]:

@@ -13,6 +13,7 @@ typedef struct {
     float3 ns;     /* shading normal on the same side as ng */
     float3 ng_raw; /* geometric normal as wound */
     float2 uv;
+    int tri;
     int material;
     float eps;     /* offset for rays leaving this point */
 } SurfacePoint;
@@ -35,17 +36,67 @@ inline SurfacePoint Surface_at(const SceneView *sc, float3 dir, const Hit *hit) 
     ns = ls > 1e-20f ? ns / ls : s.ng;
     s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
     s.uv = w * sc->uvs[3 * t] + hit->u * sc->uvs[3 * t + 1] + hit->v * sc->uvs[3 * t + 2];
+    s.tri = t;
     s.material = sc->material_of[t];
     /* p is rounded like the largest vertex coordinate it was made from */
     s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
     return s;
 }
 
-/* Base colour at the point, texture included (with textures in the scene). */
-inline float3 Surface_base(const SceneView *sc, const Material *m, float2 uv) {
+/* The shading normal of a tangent-space normal map: texel c (0..1 per
+ * channel, 0.5 flat) in the frame of the triangle's UV tangent (made
+ * orthogonal to the interpolated normal) and its bitangent, built from
+ * the normal as wound and turned back to face the ray, as Cycles' Normal
+ * Map node; Strength blends it with the smooth normal. Cycles' tangents
+ * are MikkTSpace's, per vertex; these are per triangle. Degenerate UVs
+ * keep the smooth normal. */
+inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, float strength) {
+    int t = sp->tri;
+    const __global float4 *verts = sc->tree.verts;
+    float3 e1 = verts[3 * t + 1].xyz - verts[3 * t].xyz, e2 = verts[3 * t + 2].xyz - verts[3 * t].xyz;
+    float2 d1 = sc->uvs[3 * t + 1] - sc->uvs[3 * t], d2 = sc->uvs[3 * t + 2] - sc->uvs[3 * t];
+    float det = d1.x * d2.y - d2.x * d1.y;
+    if (!(fabs(det) > 1e-20f)) return;
+    float3 tu = (e1 * d2.y - e2 * d1.y) / det, tv = (e2 * d1.x - e1 * d2.x) / det;
+    /* the normal as wound (the side the ray came from flips it back below) */
+    float facing = dot(sp->ng_raw, sp->ng) > 0.0f ? 1.0f : -1.0f;
+    float3 n = facing * sp->ns;
+    float3 tangent = tu - n * dot(n, tu);
+    float tl = length(tangent);
+    if (!(tl > 0.0f) || !isfinite(tl)) return;
+    tangent /= tl;
+    float sign = dot(cross(sp->ng_raw, tu), tv) < 0.0f ? -1.0f : 1.0f;
+    float3 b = sign * cross(n, tangent);
+    float3 m = 2.0f * c.xyz - 1.0f;
+    float3 mapped = m.x * tangent + m.y * b + m.z * n;
+    float ml = length(mapped);
+    if (!(ml > 0.0f)) return;
+    mapped = facing * mapped / ml;
+    mapped = sp->ns + (mapped - sp->ns) * strength;
+    /* kept on the side the ray came from, just above the surface at worst */
+    float above = dot(mapped, sp->ng);
+    if (above < 0.01f) mapped += (0.01f - above) * sp->ng;
+    ml = length(mapped);
+    if (ml > 0.0f && isfinite(ml)) sp->ns = mapped / ml;
+}
+
+/* The material at the point with its textures applied: Base Color times
+ * its texture (the return value), Roughness and Metallic from theirs (in
+ * m), the normal map's shading normal (in sp). Without textures in the
+ * scene, the material's values. */
+inline float3 Surface_textured(const SceneView *sc, Material *m, SurfacePoint *sp) {
     float3 base = m->base_color.xyz;
 #ifdef SCENE_HAS_TEXTURES
-    if (m->texture >= 0) base *= Texture_sample(sc->atlas, sc->textures, m->texture, uv).xyz;
+    if (m->texture >= 0) base *= Texture_sample(sc->atlas, sc->textures, m->texture, sp->uv).xyz;
+    if (m->roughness_texture >= 0)
+        m->roughness = clamp(Texture_value(sc->atlas, sc->textures, m->roughness_texture, m->roughness_channel,
+                                           sp->uv), 0.0f, 1.0f);
+    if (m->metallic_texture >= 0)
+        m->metallic = clamp(Texture_value(sc->atlas, sc->textures, m->metallic_texture, m->metallic_channel,
+                                          sp->uv), 0.0f, 1.0f);
+    if (m->normal_texture >= 0)
+        Surface_normal_map(sc, sp, Texture_sample(sc->atlas, sc->textures, m->normal_texture, sp->uv),
+                           m->normal_strength);
 #endif
     return base;
 }

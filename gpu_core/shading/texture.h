@@ -22,4 +22,14 @@ inline float4 Texture_sample(const __global float4 *atlas, const __global Textur
     return mix(a, b, ay);
 }
 
+/* The value a value socket (Roughness, Metallic) reads from texture id:
+ * one channel, or the colour's luminance (TEXTURE_LUMINANCE), as Blender
+ * converts a colour to a value. */
+inline float Texture_value(const __global float4 *atlas, const __global TextureInfo *infos, int id, int channel,
+                           float2 uv) {
+    float4 c = Texture_sample(atlas, infos, id, uv);
+    if (channel == TEXTURE_LUMINANCE) return dot(c.xyz, (float3)(0.2126f, 0.7152f, 0.0722f));
+    return channel == 0 ? c.x : (channel == 1 ? c.y : (channel == 2 ? c.z : c.w));
+}
+
 #endif

@@ -193,6 +193,61 @@ def test_image_texture_on_base_color_is_exported_linear(bpy):
     assert pixels[0, 1, 0] == pytest.approx(1.0)
 
 
+def _image(bpy, name, pixels, colorspace="Non-Color"):
+    image = bpy.data.images.new(name, len(pixels) // 4, 1)
+    image.colorspace_settings.name = colorspace
+    image.pixels = pixels
+    return image
+
+
+def test_textures_on_roughness_metallic_and_a_normal_map_are_exported(bpy):
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    mat, node = _material(bpy, "ShaderNodeBsdfPrincipled")
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    orm = nodes.new("ShaderNodeTexImage")
+    orm.image = _image(bpy, "orm", [1.0, 0.3, 0.6, 1.0])
+    separate = nodes.new("ShaderNodeSeparateColor")
+    links.new(orm.outputs["Color"], separate.inputs["Color"])
+    links.new(separate.outputs["Green"], node.inputs["Roughness"])
+    links.new(separate.outputs["Blue"], node.inputs["Metallic"])
+    normal_map = nodes.new("ShaderNodeNormalMap")
+    normal_map.inputs["Strength"].default_value = 0.7
+    bumps = nodes.new("ShaderNodeTexImage")
+    bumps.image = _image(bpy, "bumps", [0.5, 0.5, 1.0, 1.0])
+    links.new(bumps.outputs["Color"], normal_map.inputs["Color"])
+    links.new(normal_map.outputs["Normal"], node.inputs["Normal"])
+    bpy.context.object.data.materials.append(mat)
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(3, 0, 0))
+    glossy, glossy_node = _material(bpy, "ShaderNodeBsdfGlossy")
+    rough = glossy.node_tree.nodes.new("ShaderNodeTexImage")
+    rough.image = _image(bpy, "rough", [0.2, 0.2, 0.2, 0.9])
+    glossy.node_tree.links.new(rough.outputs["Alpha"], glossy_node.inputs["Roughness"])
+    bpy.context.object.data.materials.append(glossy)
+    scene = _export(bpy)
+    m = scene.materials
+    row = m.names.index("ShaderNodeBsdfPrincipled")
+    orm_id, normal_id = m.roughness_texture[row], m.normal_texture[row]
+    assert orm_id >= 0 and m.metallic_texture[row] == orm_id and (m.roughness_channel[row], m.metallic_channel[row]) == (1, 2)
+    # Non-Color: as stored, to a step of a byte image
+    assert scene.textures[orm_id][0, 0, :3] == pytest.approx([1.0, 0.3, 0.6], abs=1 / 255)
+    assert normal_id >= 0 and normal_id != orm_id and m.normal_strength[row] == pytest.approx(0.7)
+    assert m.texture_id[row] == -1
+    row = m.names.index("ShaderNodeBsdfGlossy")
+    assert m.roughness_channel[row] == 3 and scene.textures[m.roughness_texture[row]][0, 0, 3] == pytest.approx(0.9, abs=1 / 255)
+    assert not any("Roughness" in w or "Metallic" in w or "Normal" in w for w in scene.warnings)
+
+
+def test_a_bump_node_on_normal_is_named_in_the_warnings(bpy):
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    mat, node = _material(bpy, "ShaderNodeBsdfPrincipled")
+    bump = mat.node_tree.nodes.new("ShaderNodeBump")
+    mat.node_tree.links.new(bump.outputs["Normal"], node.inputs["Normal"])
+    bpy.context.object.data.materials.append(mat)
+    scene = _export(bpy)
+    assert any("ShaderNodeBump" in w for w in scene.warnings)
+    assert scene.materials.normal_texture[0] == -1
+
+
 def _light(bpy, kind, location=(0, 0, 3), rotation=(0, 0, 0), **props):
     data = bpy.data.lights.new(kind, kind)
     for key, value in props.items():
