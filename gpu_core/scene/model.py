@@ -76,30 +76,15 @@ class Materials:
         )
         rows = [{**defaults, **row} for row in rows] or [dict(defaults, name="default")]
 
-        def column(key, dtype, width=None):
-            shape = (len(rows), width) if width else (len(rows),)
+        def column(key):
+            """int32 where the default is an int, float32 otherwise; (M, 3) for colours."""
+            default = defaults[key]
+            dtype = np.int32 if isinstance(default, int) else np.float32
+            shape = (len(rows), len(default)) if isinstance(default, tuple) else (len(rows),)
             return np.array([row[key] for row in rows], dtype=dtype).reshape(shape)
 
-        return Materials(
-            base_color=column("base_color", np.float32, 3),
-            metallic=column("metallic", np.float32),
-            roughness=column("roughness", np.float32),
-            transmission=column("transmission", np.float32),
-            ior=column("ior", np.float32),
-            emission=column("emission", np.float32, 3),
-            alpha=column("alpha", np.float32),
-            texture_id=column("texture_id", np.int32),
-            roughness_texture=column("roughness_texture", np.int32),
-            roughness_channel=column("roughness_channel", np.int32),
-            metallic_texture=column("metallic_texture", np.int32),
-            metallic_channel=column("metallic_channel", np.int32),
-            normal_texture=column("normal_texture", np.int32),
-            normal_strength=column("normal_strength", np.float32),
-            specular_ior_level=column("specular_ior_level", np.float32),
-            specular_tint=column("specular_tint", np.float32, 3),
-            shader=column("shader", np.int32),
-            names=[row["name"] for row in rows],
-        )
+        return Materials(**{key: column(key) for key in defaults if key != "name"},
+                         names=[row["name"] for row in rows])
 
     def __len__(self) -> int:
         return len(self.base_color)
