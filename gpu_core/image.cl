@@ -63,9 +63,9 @@ inline float Image_visibility(const SceneView *sc, float3 org, float3 dir, float
     for (int i = 0; i < IMAGE_MAX_PASSTHROUGH; ++i) {
         Hit hit;
         if (!KdTree_intersect(&sc->tree, org, dir, tmin, tmax, &hit)) return vis;
-        float alpha = sc->materials[sc->material_of[hit.tri]].base_color.w;
-        if (alpha >= 1.0f) return 0.0f;
-        vis *= 1.0f - alpha;
+        float passed = Surface_transmittance(sc, hit.tri, Surface_uv(sc, &hit));
+        if (!(passed > 0.0f)) return 0.0f;
+        vis *= passed;
         tmin = hit.t + Ray_offset(fmax(hit.t, Ray_magnitude(org)));
     }
     return 0.0f;
@@ -264,7 +264,7 @@ inline float3 Image_lights_seen(const SceneView *sc, const ImageState *st, int l
     for (int i = 0; i < sc->light_count; ++i) {
         Light l = sc->lights[i];
         float rate = Image_light_rate(sc, i) * (float)light_samples, pdf;
-        float3 seen = Light_seen(&l, st->org, st->dir, tmax, &pdf);
+        float3 seen = Light_seen(&l, st->org, st->dir, st->tmin, tmax, &pdf);
         sum += seen * Image_mis(st->pdf, pdf * rate);
         if (escaped) {
             seen = Light_sun_seen(&l, st->dir, &pdf);
@@ -403,12 +403,15 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
             return;
         }
         SurfacePoint sp = Surface_at(sc, st.dir, &hit);
-        Material m = sc->materials[sp.material];
+        Material m = Surface_material(sc, sp.tri, sp.uv, SURFACE_MIX_U(rng));
         float3 base = Surface_textured(sc, &m, &sp);
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(rng) >= m.base_color.w && st.passes < IMAGE_MAX_PASSTHROUGH) {
             st.passes++;
-            Image_continue(&st, sp.p - sp.eps * sp.ng, st.dir);
+            st.throughput *= m.mix_scale;
+            /* the segment goes on from the same origin, so the lights and
+             * emitters it meets are weighed from the point that scattered it */
+            st.tmin = hit.t + Ray_offset(fmax(hit.t, Ray_magnitude(st.org)));
             continue;
         }
         if (st.bounces == 0) {

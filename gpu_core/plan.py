@@ -25,6 +25,7 @@ from .accel import kdtree_build
 from .device.primitives import programs as primitives_programs
 from .scene.model import PARTS, Scene, part_digests
 from .scene.tables import SceneTables, scene_tables
+from .scene.tables import scene_defines as scene_program_defines
 from .settings import RenderSettings
 
 # settings photon tracing reads: a change traces the maps again
@@ -121,9 +122,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     generations = {part: held.generations[part] + (part in changed) for part in PARTS}
     stages = ["validate", "kdtree_reused" if "geometry" not in changed else "kdtree", "upload", "direct_light"]
     stages += _features(scene, settings, tables)
-    scene_defines = {"SCENE_HAS_TEXTURES": 1} if "textures" in stages else {}
-    if "alpha_shadows" in stages:
-        scene_defines["SCENE_HAS_ALPHA"] = 1
+    scene_defines = scene_program_defines(scene)
     image_defines = dict(scene_defines)
     if "light_passes" in stages:
         image_defines["IMAGE_LIGHT_PASSES"] = 1
@@ -183,6 +182,8 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
         features.append("mesh_lights")
     if scene.has_alpha():
         features.append("alpha_shadows")
+    if scene.has_mix():
+        features.append("mixed_surfaces")
     if settings.light_passes:
         features.append("light_passes")
     if settings.denoising_passes:

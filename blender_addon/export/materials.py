@@ -2,15 +2,20 @@
 
 Supported: Principled BSDF (Base Color, Metallic, Roughness, Transmission
 Weight, IOR, Specular IOR Level, Specular Tint, Emission Color x Strength,
-Alpha), Diffuse, Glossy, Glass and Emission shaders, Add and Mix Shader over them (emission is summed, the
-surface is the dominant shader), an Image Texture on Base Color or
-Color, on Roughness or Metallic (its Color as luminance, its Alpha, or a
+Alpha), Diffuse, Glossy, Glass, Transparent and Emission shaders, Add and
+Mix Shader over them (emission is summed; the surfaces become a chain of
+rows, one picked per shading event by its weight; a Mix's Fac may be an
+Image Texture where it mixes two surfaces), an Image Texture on Base Color
+or Color, on Roughness or Metallic (its Color as luminance, its Alpha, or a
 channel through Separate Color), and a tangent-space Normal Map node with
-an Image Texture on the shaders' Normal. Anything else falls back to a default value and is named in the
-warnings; nothing here raises on an unexpected node tree.
+an Image Texture on the shaders' Normal. Anything else falls back to a
+default value and is named in the warnings; nothing here raises on an
+unexpected node tree.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,6 +33,16 @@ _PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", 
                            ("Anisotropic", "anisotropy"))
 
 
+@dataclass
+class Surface:
+    """What a shader node outputs: its surfaces, each a row with the weight
+    it is summed with, and the emission they add."""
+
+    leaves: list = field(default_factory=list)  # (weight, row)
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    fac: dict | None = None  # a Mix's Fac texture over exactly two leaves: mix_texture, mix_channel
+
+
 class MaterialTable:
     """Material rows and textures, one row per distinct Blender material."""
 
@@ -38,6 +53,7 @@ class MaterialTable:
         self.textures: list[np.ndarray] = []
         self.exported = 0  # materials read from Blender so far
         self._index: dict = {None: 0}
+        self._chains: dict = {}  # material -> rows after its first that hold the other surfaces of its mix
         self._images: dict = {}
         self._pixels = {} if pixels is None else pixels
         self._stale: set[str] = set()  # materials edited since their row was made
@@ -53,11 +69,24 @@ class MaterialTable:
         key = material.original.name_full if material is not None else None
         if key not in self._index:
             self._index[key] = len(self.rows)
-            self.rows.append(self._exported(key, material))
+            self.rows.append({})
+            self._place(key, self._exported(key, material))
         elif key in self._stale:
-            self.rows[self._index[key]] = self._exported(key, material)
+            self._place(key, self._exported(key, material))
         self._stale.discard(key)
         return self._index[key]
+
+    def _place(self, key, rows: list[dict]) -> None:
+        """Put a material's rows in the table: the first at its index, the
+        rest of its mix in rows of its own after it (kept across edits,
+        more added at the end when an edit needs them), linked by mix_next."""
+        chain = self._chains.setdefault(key, [])
+        while len(chain) < len(rows) - 1:
+            chain.append(len(self.rows))
+            self.rows.append({**DEFAULT_ROW, "name": f"{rows[0]['name']} (unused)"})
+        slots = [self._index[key]] + chain[:len(rows) - 1]
+        for i, (slot, row) in enumerate(zip(slots, rows)):
+            self.rows[slot] = {**row, "mix_next": slots[i + 1] if i + 1 < len(slots) else -1}
 
     def forget(self, name: str) -> None:
         """Export the material ``name`` again at its next use (it was edited);
@@ -85,29 +114,39 @@ class MaterialTable:
 
     # -- node tree ------------------------------------------------------------
 
-    def _export(self, mat) -> dict:
-        """The row of one material: its surface shader, or its viewport colours."""
+    def _export(self, mat) -> list[dict]:
+        """The rows of one material: its surface shader's (one per surface
+        of a mix), or its viewport colours."""
         if mat.node_tree is None:
-            return {
+            return [{
                 "name": mat.name,
                 "base_color": tuple(mat.diffuse_color[:3]),
                 "metallic": float(mat.metallic),
                 "roughness": float(mat.roughness),
-            }
+            }]
         output = _output_node(mat.node_tree)
         source = _linked_node(output.inputs["Surface"]) if output is not None else None
         if source is None:
             self._warn(f"material '{mat.name}': nothing is connected to the Surface output; used the default material")
-            return {**DEFAULT_ROW, "name": mat.name}
-        row = self._shader(mat.name, source)
-        row.pop("emission_only", None)
-        return {**row, "name": mat.name}
+            return [{**DEFAULT_ROW, "name": mat.name}]
+        return _mix_rows(mat.name, self._shader(mat.name, source))
 
-    def _shader(self, name: str, node) -> dict:
-        """Row fields of the shader ``node`` outputs."""
+    def _shader(self, name: str, node) -> Surface:
+        """What the shader ``node`` outputs."""
         kind = node.bl_idname
         if kind == "ShaderNodeBsdfPrincipled":
-            return self._principled(name, node)
+            row = self._principled(name, node)
+            return Surface([(1.0, row)], np.array(row.pop("emission")))
+        if kind in ("ShaderNodeAddShader", "ShaderNodeMixShader"):
+            return self._combine(name, node)
+        if kind == "ShaderNodeEmission":
+            color = np.array(self._color_value(name, node.inputs["Color"])) * self._value(name, node.inputs["Strength"])
+            return Surface([], color)
+        return Surface([(1.0, self._bsdf(name, node))])
+
+    def _bsdf(self, name: str, node) -> dict:
+        """The row of a one-lobe shader node (Diffuse, Glossy, Glass, Transparent)."""
+        kind = node.bl_idname
         if kind == "ShaderNodeBsdfDiffuse":
             return {**self._color(name, node.inputs["Color"]), "roughness": 1.0, **self._normal(name, node)}
         if kind in _GLOSSY:
@@ -130,11 +169,10 @@ class MaterialTable:
                 "ior": self._value(name, node.inputs["IOR"]),
                 **self._normal(name, node),
             }
-        if kind == "ShaderNodeEmission":
-            color = np.array(self._color_value(name, node.inputs["Color"])) * self._value(name, node.inputs["Strength"])
-            return {"base_color": BLACK, "emission": tuple(float(c) for c in color), "emission_only": True}
-        if kind in ("ShaderNodeAddShader", "ShaderNodeMixShader"):
-            return self._combine(name, node)
+        if kind == "ShaderNodeBsdfTransparent":
+            if self._color_value(name, node.inputs["Color"]) != [1.0, 1.0, 1.0]:
+                self._warn(f"material '{name}': the colour of {node.name} is not supported; passed light untinted")
+            return {"base_color": BLACK, "alpha": 0.0}
         self._warn(f"material '{name}': shader node '{node.bl_idname}' is not supported; used the default material")
         return dict(DEFAULT_ROW)
 
@@ -158,33 +196,31 @@ class MaterialTable:
             "emission": tuple(float(c) for c in emission),
         }
 
-    def _combine(self, name: str, node) -> dict:
-        """Add/Mix Shader: emission is added (weighted by the mix factor),
-        the surface is that of the shader with the larger weight."""
-        shaders = [s for s in node.inputs if s.type == "SHADER"]
-        weights = [1.0, 1.0]
-        if node.bl_idname == "ShaderNodeMixShader":
-            fac = float(np.clip(self._value(name, node.inputs["Fac"]), 0.0, 1.0))
-            weights = [1.0 - fac, fac]
-        rows = []
-        for socket, weight in zip(shaders, weights):
-            source = _linked_node(socket)
-            if source is not None and weight > 0.0:
-                rows.append((weight, self._shader(name, source)))
-        if not rows:
-            return {"base_color": BLACK, "emission_only": True}
-        emission = sum(np.array(row.get("emission", BLACK)) * weight for weight, row in rows)
-        surfaces = [(weight, row) for weight, row in rows if not row.get("emission_only")]
-        if not surfaces:
-            row = {"base_color": BLACK, "emission_only": True}
-        elif len(surfaces) == 1:
-            # one surface mixed with emission or nothing: it reflects its share
-            weight, row = surfaces[0]
-            row = {**row, "base_color": tuple(float(c) * min(weight, 1.0) for c in row["base_color"])}
-        else:
-            self._warn(f"material '{name}': {node.name} mixes two surfaces; used the one with the larger weight")
-            row = max(surfaces, key=lambda item: item[0])[1]
-        return {**row, "emission": tuple(float(c) for c in emission)}
+    def _combine(self, name: str, node) -> Surface:
+        """Add/Mix Shader: the surfaces of both inputs, weighted (1 each, or
+        1 - Fac and Fac), and their emission summed the same way. An Image
+        Texture on a Mix's Fac stays a texture where the Mix is of one
+        surface each side (else its value is used)."""
+        sources = [_linked_node(s) for s in node.inputs if s.type == "SHADER"]
+        sides = [self._shader(name, source) if source is not None else Surface() for source in sources]
+        if any(side.fac for side in sides):
+            self._warn(f"material '{name}': a textured Mix Fac inside {node.name} is not supported; used its value")
+        if node.bl_idname == "ShaderNodeAddShader":
+            return _weighted(sides, [1.0, 1.0])
+        value = self._texture_value(name, node.inputs["Fac"], "mix")
+        fac = float(np.clip(value["mix"], 0.0, 1.0))
+        surface = _weighted(sides, [1.0 - fac, fac])
+        if "mix_texture" not in value:
+            return surface
+        if not all(len(side.leaves) == 1 for side in sides):
+            self._warn(f"material '{name}': the texture on {node.name} > Fac mixes more than two surfaces; "
+                       "used its value")
+            return surface
+        if any(side.emission.any() for side in sides):
+            self._warn(f"material '{name}': emission under the texture on {node.name} > Fac uses the Fac's value")
+        # the texture picks between the two surfaces, each keeping its own weight
+        texture = {"mix_texture": value["mix_texture"], "mix_channel": value["mix_channel"], "mix_stop": 1.0 - fac}
+        return Surface([side.leaves[0] for side in sides], surface.emission, texture)
 
     # -- sockets --------------------------------------------------------------
 
@@ -284,6 +320,36 @@ class MaterialTable:
             self._images[key] = len(self.textures)
             self.textures.append(pixels)
         return self._images[key]
+
+
+def _weighted(sides: list[Surface], weights: list[float]) -> Surface:
+    """The sum of ``sides`` times ``weights``: their surfaces of weight
+    above 0, and their emission."""
+    leaves = [(w * weight, row) for side, weight in zip(sides, weights) for w, row in side.leaves if w * weight > 0.0]
+    return Surface(leaves, sum((side.emission * weight for side, weight in zip(sides, weights)), np.zeros(3)))
+
+
+def _mix_rows(name: str, surface: Surface) -> list[dict]:
+    """The rows of a material's surface: one per surface of a mix, each
+    with the chance of picking it once the rows before it were passed
+    (mix_stop) and its weight over its chance (mix_scale), all with the
+    mix's emission; none but emission gives a black surface."""
+    emission = tuple(float(c) for c in surface.emission)
+    leaves = surface.leaves or [(1.0, {"base_color": BLACK})]
+    if surface.fac is not None:
+        # the Fac texture gives the chances; each surface keeps its own weight
+        (w0, first), (w1, second) = leaves
+        return [{**first, **surface.fac, "mix_scale": w0, "emission": emission, "name": name},
+                {**second, "mix_scale": w1, "emission": emission, "name": f"{name} (2)"}]
+    total = sum(weight for weight, _ in leaves)
+    rows, left = [], 1.0
+    for i, (weight, row) in enumerate(leaves):
+        chance = weight / total
+        stop = 1.0 if i == len(leaves) - 1 else min(chance / max(left, 1e-12), 1.0)
+        left -= chance
+        rows.append({**row, "mix_stop": stop, "mix_scale": total, "emission": emission,
+                     "name": name if i == 0 else f"{name} ({i + 1})"})
+    return rows
 
 
 def image_pixels(image) -> np.ndarray | None:

@@ -87,6 +87,12 @@ MATERIAL = Struct("Material", "a material row (shading/bsdf.h)", [
     ("metallic_channel", "int", "its channel, as roughness_channel"),
     ("normal_texture", "int", "a tangent-space normal map, -1 for none"),
     ("normal_strength", "float", "the Normal Map node's Strength"),
+    ("mix_next", "int", "a mix of surfaces: the chain's next row (after this one), -1 at its end"),
+    ("mix_stop", "float", "the chance of using this row once the pick reached it (1 at the chain's end)"),
+    ("mix_scale", "float", "what the BSDF and pass-through are scaled by: weight / chance of the pick"),
+    ("mix_texture", "int", "a Mix Shader's Fac texture: mix_stop = 1 - its value, -1 for none"),
+    ("mix_channel", "int", "its channel, as roughness_channel"),
+    ("pad", "int", "", 3),
 ])
 
 LIGHT = Struct("Light", "a light row; derived values are computed on the host in float64", [

@@ -24,7 +24,7 @@ inline float3 Gather_lights_seen(const SceneView *sc, float3 org, float3 dir, fl
     float pdf;
     for (int i = 0; i < sc->light_count; ++i) {
         Light l = sc->lights[i];
-        sum += Light_seen(&l, org, dir, tmax, &pdf);
+        sum += Light_seen(&l, org, dir, 0.0f, tmax, &pdf);
         if (escaped) sum += Light_sun_seen(&l, dir, &pdf);
     }
     return escaped ? sum + sc->world.xyz : sum;
@@ -54,7 +54,7 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
         if (!found) return sum;
         if (bounce == 0) first_t = hit.t;
         SurfacePoint sp = Surface_at(sc, dir, &hit);
-        Material m = sc->materials[sp.material];
+        Material m = Surface_material(sc, sp.tri, sp.uv, SURFACE_MIX_U(&rng));
         if (rough) sum += throughput * PI_F * m.emission.xyz;
         float3 base = Surface_textured(sc, &m, &sp);
         Bsdf f = Surface_bsdf(&sp, &m, base, dir, BSDF_SAMPLE_GLOSSY);

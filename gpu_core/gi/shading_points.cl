@@ -38,7 +38,8 @@ __kernel void ShadingPoints_trace(SCENE_PARAMS, const int4 window, const int sub
         Hit hit;
         if (!KdTree_intersect(&sc.tree, org, dir, tmin, tmax, &hit)) return;
         SurfacePoint sp = Surface_at(&sc, dir, &hit);
-        Material m = sc.materials[sp.material];
+        Rng pick = Rng_make((uint)g, (uint)(bounces + passes), 0x6d697821U);
+        Material m = Surface_material(&sc, sp.tri, sp.uv, SURFACE_MIX_U(&pick));
         /* mostly see-through surfaces are passed, as most camera samples do */
         if (m.base_color.w < 0.5f && passes < SHADING_POINTS_MAX_PASSTHROUGH) {
             passes++;

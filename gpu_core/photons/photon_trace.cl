@@ -83,11 +83,12 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
         if (!KdTree_intersect(&sc.tree, org, dir, 0.0f, RAY_FAR, &hit)) break;
         hits++;
         SurfacePoint sp = Surface_at(&sc, dir, &hit);
-        Material m = sc.materials[sp.material];
+        Material m = Surface_material(&sc, sp.tri, sp.uv, SURFACE_MIX_U(&rng));
         float3 base = Surface_textured(&sc, &m, &sp);
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(&rng) >= m.base_color.w && passes < PHOTON_MAX_PASSTHROUGH) {
             passes++;
+            power *= m.mix_scale;
             org = sp.p - sp.eps * sp.ng;
             continue;
         }

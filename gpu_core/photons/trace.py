@@ -22,7 +22,7 @@ from ..device.constants import PHOTON_PASS_ALL, PHOTON_PASS_CAUSTIC, PHOTON_PASS
 from ..device.timer import StageTimer
 from ..errors import GpuGiError
 from ..scene.model import Scene
-from ..scene.tables import SceneTables, scene_tables
+from ..scene.tables import SceneTables, scene_defines, scene_tables
 from ..scene.upload import SceneBuffers, upload
 from ..scene.validate import validate
 from .emit import MAPS, Emitter, allocate, emitter_powers, maps_needed
@@ -152,6 +152,6 @@ def trace_photon_maps(device: Device, scene: Scene, global_photons: int = 100_00
     buffers = upload(device, scene, tables)
     emitters = emitter_powers(scene, tables)
     maps = maps_needed(emitters, scene.triangle_count, scene.has_specular(), global_photons, caustic_photons)
-    defines = {"SCENE_HAS_TEXTURES": 1} if scene.has_textures() else {}
     return trace_maps(device, buffers, emitters, maps,
-                      PhotonSettings(global_photons, caustic_photons, seed, k_hint, max_specular, max_bounces), defines)
+                      PhotonSettings(global_photons, caustic_photons, seed, k_hint, max_specular, max_bounces),
+                      scene_defines(scene))

@@ -17,8 +17,8 @@ from ..device.constants import (AREA_RECTANGLE, CAMERA_PERSP, CAUSTIC_ROUGHNESS,
                                 MATERIAL_PRINCIPLED, TEXTURE_LUMINANCE)
 
 
-_SINGULAR_ROUGHNESS = 2e-10 ** 0.25
-LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)  # shading/texture.h's Texture_value, Blender's linear Rec. 709  # roughness of MICROFACET_SINGULAR_ALPHA2 (alpha = roughness^2)
+_SINGULAR_ROUGHNESS = 2e-10 ** 0.25  # roughness of MICROFACET_SINGULAR_ALPHA2 (alpha = roughness^2)
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)  # shading/texture.h's Texture_value, Blender's linear Rec. 709
 
 
 @dataclass
@@ -30,6 +30,11 @@ class Materials:
     BSDF, a row made here has no specular layer unless it asks for one
     (``specular_ior_level`` 0: a Lambertian base); the add-on passes
     Blender's value (0.5 by default).
+
+    A mix of surfaces (Mix and Add Shader) is a chain of rows from the
+    triangle's row along ``mix_next``: each shading event uses one row of
+    it, picked with the rows' chances (``mix_stop``), its BSDF scaled by
+    ``mix_scale`` so the pick is unbiased. Emission is the first row's.
     """
 
     base_color: np.ndarray  # (M, 3) float32, linear
@@ -46,6 +51,11 @@ class Materials:
     metallic_channel: np.ndarray  # (M,) int32, as roughness_channel
     normal_texture: np.ndarray  # (M,) int32, -1 for none: a tangent-space normal map (Normal Map node)
     normal_strength: np.ndarray  # (M,) float32: the Normal Map node's Strength
+    mix_next: np.ndarray  # (M,) int32: a mix of surfaces, the chain's next row (a later one), -1 at its end
+    mix_stop: np.ndarray  # (M,) float32: the chance of using this row once the pick reached it
+    mix_scale: np.ndarray  # (M,) float32: the row's BSDF (and pass-through) times this: weight / chance
+    mix_texture: np.ndarray  # (M,) int32, -1 for none: a Mix Shader's Fac, mix_stop = 1 - its value
+    mix_channel: np.ndarray  # (M,) int32, as roughness_channel
     specular_ior_level: np.ndarray  # (M,) float32: 0 no dielectric layer, 0.5 F0 of the IOR, 1 twice that
     specular_tint: np.ndarray  # (M, 3) float32: tints F0 of the dielectric layers, F82 of the metal
     shader: np.ndarray  # (M,) int32: MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS
@@ -69,6 +79,11 @@ class Materials:
             metallic_channel=TEXTURE_LUMINANCE,
             normal_texture=-1,
             normal_strength=1.0,
+            mix_next=-1,
+            mix_stop=1.0,
+            mix_scale=1.0,
+            mix_texture=-1,
+            mix_channel=TEXTURE_LUMINANCE,
             specular_ior_level=0.0,
             specular_tint=(1.0, 1.0, 1.0),
             shader=MATERIAL_PRINCIPLED,
@@ -236,8 +251,24 @@ class Scene:
         return len(self.triangles)
 
     def used_materials(self) -> np.ndarray:
-        """Indices of the materials some triangle uses."""
-        return np.unique(self.material_ids)
+        """Indices of the materials some triangle uses, with the rows of
+        their mixes (chains along mix_next, forward only as the table's)."""
+        used = set(np.unique(self.material_ids).tolist())
+        rows, following = len(self.materials), self.materials.mix_next
+        frontier = list(used)
+        while frontier:
+            row = frontier.pop()
+            nxt = int(following[row]) if 0 <= row < rows else -1
+            if row < nxt < rows and nxt not in used:
+                used.add(nxt)
+                frontier.append(nxt)
+        return np.array(sorted(used), np.int64)
+
+    def has_mix(self) -> bool:
+        """Whether a triangle's material mixes surfaces (a chain of rows)."""
+        m, rows = self.materials, np.unique(self.material_ids)
+        rows = rows[(rows >= 0) & (rows < len(m))]
+        return bool(((m.mix_next[rows] > rows) & (m.mix_next[rows] < len(m))).any())
 
     def has_specular(self) -> bool:
         """Whether a triangle is near-specular metal or glass (roughness
@@ -275,7 +306,8 @@ class Scene:
     def has_textures(self) -> bool:
         """Whether a triangle's material reads a texture."""
         used, m = self.used_materials(), self.materials
-        bound = [m.texture_id[used], m.roughness_texture[used], m.metallic_texture[used], m.normal_texture[used]]
+        bound = [m.texture_id[used], m.roughness_texture[used], m.metallic_texture[used], m.normal_texture[used],
+                 m.mix_texture[used]]
         return bool(self.textures) and any(bool((ids >= 0).any()) for ids in bound)
 
     def has_alpha(self) -> bool:

@@ -62,6 +62,14 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
     return SceneTables(center, radius, materials, lights, emitted, emit_tris, emit_cdf, atlas, infos, camera)
 
 
+def scene_defines(scene: Scene) -> dict:
+    """The features every program reading ``scene`` is compiled with: only
+    those it has (textures, see-through surfaces, mixes of surfaces)."""
+    has = {"SCENE_HAS_TEXTURES": scene.has_textures(), "SCENE_HAS_ALPHA": scene.has_alpha(),
+           "SCENE_HAS_MIX": scene.has_mix()}
+    return {define: 1 for define, wanted in has.items() if wanted}
+
+
 def material_table(scene: Scene) -> np.ndarray:
     m = scene.materials
     table = np.zeros(len(m), MATERIAL_DTYPE)
@@ -84,6 +92,13 @@ def material_table(scene: Scene) -> np.ndarray:
     table["metallic_channel"] = np.clip(m.metallic_channel, 0, TEXTURE_LUMINANCE)
     table["normal_texture"] = _texture_index(m.normal_texture, scene)
     table["normal_strength"] = np.clip(np.nan_to_num(m.normal_strength, nan=1.0), 0.0, 1e3)
+    # a chain of a mix only runs forward, so it ends
+    rows = np.arange(len(m))
+    table["mix_next"] = np.where((m.mix_next > rows) & (m.mix_next < len(m)), m.mix_next, -1)
+    table["mix_stop"] = np.where(table["mix_next"] >= 0, np.clip(np.nan_to_num(m.mix_stop, nan=1.0), 0.0, 1.0), 1.0)
+    table["mix_scale"] = np.clip(np.nan_to_num(m.mix_scale, nan=1.0), 0.0, 1e3)
+    table["mix_texture"] = np.where(table["mix_next"] >= 0, _texture_index(m.mix_texture, scene), -1)
+    table["mix_channel"] = np.clip(m.mix_channel, 0, TEXTURE_LUMINANCE)
     level = np.where(shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.specular_ior_level), 0.0, 1e3), 0.0)
     tint = np.clip(np.nan_to_num(m.specular_tint, nan=1.0), 0.0, 1e3)
     table["specular_tint"][:, :3] = tint

@@ -53,6 +53,7 @@ typedef struct {
     float glass_eta;      /* n_t / n_i on this side */
     float3 glass_f0, glass_rtint, glass_ttint;
     float q[BSDF_LOBES];  /* probability of sampling each lobe */
+    int sample;           /* the lobes sampling may choose (BSDF_SAMPLE_*) */
 } Bsdf;
 
 inline float Bsdf_avg(float3 c) { return (c.x + c.y + c.z) * (1.0f / 3.0f); }
@@ -88,6 +89,7 @@ inline float Bsdf_reflect_probability(float3 r, float3 t) {
 inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns, float3 ng, bool entering,
                       int sample) {
     Bsdf f;
+    f.sample = sample;
     f.n = dot(ns, wo_world) > 1e-6f ? ns : ng;
     Sampling_frame(f.n, &f.t, &f.b);
     f.wo = Bsdf_to_local(&f, wo_world);
@@ -102,9 +104,11 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     float3 c = fmax(base, (float3)(0.0f)), cc = fmin(c, (float3)(1.0f));
     float3 tint = fmax(m->specular_tint.xyz, (float3)(0.0f));
     float3 one = (float3)(1.0f);
-    f.w_metal = metallic;
-    f.w_glass = (1.0f - metallic) * transmission;
-    f.w_specular = (1.0f - metallic) * (1.0f - transmission);
+    /* a surface of a mix carries its weight over the chance it was picked with */
+    float scale = m->mix_scale;
+    f.w_metal = scale * metallic;
+    f.w_glass = scale * (1.0f - metallic) * transmission;
+    f.w_specular = scale * (1.0f - metallic) * (1.0f - transmission);
     /* metal */
     f.metal_constant = m->shader == MATERIAL_GLOSSY;
     f.metal_f0 = cc;
@@ -134,7 +138,8 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
         float3 albedo = Microfacet_E(f.rough, mu) * f.spec_ms * mix(f.spec_f0, one, Microfacet_S(f.rough, mu, f.spec_eta));
         layer = clamp(1.0f - fmax(fmax(albedo.x, albedo.y), albedo.z), 0.0f, 1.0f);
     }
-    f.diffuse = m->shader == MATERIAL_PRINCIPLED ? c * ((1.0f - metallic) * (1.0f - transmission) * layer) : (float3)(0.0f);
+    f.diffuse = m->shader == MATERIAL_PRINCIPLED ? c * (scale * (1.0f - metallic) * (1.0f - transmission) * layer)
+                                                 : (float3)(0.0f);
     /* sampling weights: each lobe's albedo, estimated at the normal */
     for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = 0.0f;
     if (sample & BSDF_SAMPLE_DIFFUSE) f.q[BSDF_DIFFUSE] = Bsdf_avg(f.diffuse);
@@ -202,8 +207,8 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
     return f->w_glass * v * t;
 }
 
-/* Sample a direction: *wi (local), *weight = f cos / pdf, *pdf (0 for a
- * singular direction). Returns its BSDF_LABEL_* flags, 0 when the sample
+/* Sample a direction: *wi (local), *weight = f cos / pdf over the lobes
+ * sampling may choose, *pdf (0 for a singular direction). Returns its BSDF_LABEL_* flags, 0 when the sample
  * is lost (no lobe, below the surface, total internal reflection). */
 inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3, float3 *wi, float3 *weight,
                        float *pdf) {
@@ -258,6 +263,10 @@ inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3
     float3 diffuse;
     float3 glossy = Bsdf_eval(f, *wi, &diffuse, pdf);
     if (!(*pdf > 0.0f)) return 0;
+    /* the lobes sampling may not choose carry nothing on: their light
+     * comes another way (the cache, the cut) or not at all (bounce limits) */
+    if (!(f->sample & BSDF_SAMPLE_DIFFUSE)) diffuse = (float3)(0.0f);
+    if (!(f->sample & BSDF_SAMPLE_GLOSSY)) glossy = (float3)(0.0f);
     *weight = (glossy + diffuse) / *pdf;
     return label;
 }

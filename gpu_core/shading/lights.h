@@ -275,12 +275,12 @@ inline LightSample Light_sample(const Light *l, const Emitters *em, float3 x, fl
     return Light_sample_point(l, x, u1, u2);
 }
 
-/* Radiance a ray (org, dir) sees on a point, spot or area light closer than
- * tmax, zero when it misses, and in *pdf the solid-angle pdf with which
+/* Radiance a ray (org, dir) sees on a point, spot or area light between
+ * tmin and tmax, zero when it misses, and in *pdf the solid-angle pdf with which
  * Light_sample picks that direction from org. Area lights show only their
  * emitting side; point and spot lights show their disk facing the ray
  * origin. */
-inline float3 Light_seen(const Light *l, float3 org, float3 dir, float tmax, float *pdf) {
+inline float3 Light_seen(const Light *l, float3 org, float3 dir, float tmin, float tmax, float *pdf) {
     float3 none = (float3)(0.0f);
     *pdf = 0.0f;
     if (!(l->radiance.x > 0.0f || l->radiance.y > 0.0f || l->radiance.z > 0.0f)) return none;
@@ -299,7 +299,7 @@ inline float3 Light_seen(const Light *l, float3 org, float3 dir, float tmax, flo
     float dn = dot(dir, nrm);
     if (!(dn < 0.0f)) return none; /* one-sided: only rays travelling against the normal */
     float t = dot(c - org, nrm) / dn;
-    if (!(t > 0.0f && t < tmax)) return none;
+    if (!(t > fmax(tmin, 0.0f) && t < tmax)) return none;
     float3 q = org + t * dir - c;
     if (l->kind == LIGHT_AREA) {
         float a = dot(q, l->axis_u.xyz) / dot(l->axis_u.xyz, l->axis_u.xyz);

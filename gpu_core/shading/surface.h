@@ -3,6 +3,7 @@
 #ifndef GPUGI_SURFACE_H
 #define GPUGI_SURFACE_H
 #include "device/ray.h"
+#include "device/rng.h"
 #include "shading/scene.h"
 #include "shading/texture.h"
 #include "shading/bsdf.h"
@@ -14,9 +15,25 @@ typedef struct {
     float3 ng_raw; /* geometric normal as wound */
     float2 uv;
     int tri;
-    int material;
     float eps;     /* offset for rays leaving this point */
 } SurfacePoint;
+
+/* At most this many rows in the chain of a mix of surfaces. */
+#define SURFACE_MAX_MIX 16
+
+/* The random number a shading event spends on picking one surface of a
+ * mix; none without mixes, so other scenes keep their random streams. */
+#ifdef SCENE_HAS_MIX
+#define SURFACE_MIX_U(rng) Rng_next(rng)
+#else
+#define SURFACE_MIX_U(rng) 0.0f
+#endif
+
+/* The texture coordinates at a hit. */
+inline float2 Surface_uv(const SceneView *sc, const Hit *hit) {
+    int t = hit->tri;
+    return (1.0f - hit->u - hit->v) * sc->uvs[3 * t] + hit->u * sc->uvs[3 * t + 1] + hit->v * sc->uvs[3 * t + 2];
+}
 
 /* The surface hit by a ray travelling along dir. */
 inline SurfacePoint Surface_at(const SceneView *sc, float3 dir, const Hit *hit) {
@@ -35,12 +52,61 @@ inline SurfacePoint Surface_at(const SceneView *sc, float3 dir, const Hit *hit) 
     float ls = length(ns);
     ns = ls > 1e-20f ? ns / ls : s.ng;
     s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
-    s.uv = w * sc->uvs[3 * t] + hit->u * sc->uvs[3 * t + 1] + hit->v * sc->uvs[3 * t + 2];
+    s.uv = Surface_uv(sc, hit);
     s.tri = t;
-    s.material = sc->material_of[t];
     /* p is rounded like the largest vertex coordinate it was made from */
     s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
     return s;
+}
+
+/* The chance of stopping at row m of a mix's chain once the pick reached
+ * it: its Fac texture's 1 - value where it has one, else mix_stop. */
+inline float Surface_mix_stop(const SceneView *sc, const Material *m, float2 uv) {
+#ifdef SCENE_HAS_TEXTURES
+    if (m->mix_texture >= 0)
+        return 1.0f - clamp(Texture_value(sc->atlas, sc->textures, m->mix_texture, m->mix_channel, uv), 0.0f, 1.0f);
+#endif
+    return m->mix_stop;
+}
+
+/* The material of one shading event at the triangle `tri`: its row, or
+ * for a mix of surfaces one row of the chain, picked by u in [0, 1) with
+ * each row's chance (its BSDF carries mix_scale, Bsdf_make). The emission
+ * is the first row's, the mix's sum. */
+inline Material Surface_material(const SceneView *sc, int tri, float2 uv, float u) {
+    Material m = sc->materials[sc->material_of[tri]];
+#ifdef SCENE_HAS_MIX
+    float4 emission = m.emission;
+    for (int i = 0; i < SURFACE_MAX_MIX && m.mix_next >= 0; ++i) {
+        float stop = Surface_mix_stop(sc, &m, uv);
+        if (u < stop) break;
+        /* what is left of u picks among the rest */
+        u = fmin((u - stop) / fmax(1.0f - stop, 1e-20f), 0.99999994f);
+        m = sc->materials[m.mix_next];
+    }
+    m.emission = emission;
+#endif
+    return m;
+}
+
+/* The fraction of light a shadow ray passes through the triangle `tri` at
+ * uv: 1 - alpha, over the rows of a mix weighed by their chance and scale
+ * (a Transparent BSDF is a row of alpha 0). */
+inline float Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
+    Material m = sc->materials[sc->material_of[tri]];
+#ifdef SCENE_HAS_MIX
+    float passed = 0.0f, reach = 1.0f;
+    for (int i = 0; i < SURFACE_MAX_MIX; ++i) {
+        float stop = m.mix_next >= 0 ? Surface_mix_stop(sc, &m, uv) : 1.0f;
+        passed += reach * stop * m.mix_scale * (1.0f - m.base_color.w);
+        reach *= 1.0f - stop;
+        if (m.mix_next < 0 || !(reach > 0.0f)) break;
+        m = sc->materials[m.mix_next];
+    }
+    return clamp(passed, 0.0f, 1.0f);
+#else
+    return 1.0f - m.base_color.w;
+#endif
 }
 
 /* The shading normal of a tangent-space normal map: texel c (0..1 per

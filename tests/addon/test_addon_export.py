@@ -8,7 +8,8 @@ import pytest
 from blender_addon.export import ExportError, export_scene
 from blender_addon.final import LAST_RUN
 from conftest import render_to_array
-from gpu_core.scene import AREA_ELLIPSE, AREA_RECTANGLE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN
+from gpu_core.scene import (AREA_ELLIPSE, AREA_RECTANGLE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN,
+                            TEXTURE_LUMINANCE, Materials)
 
 
 def _camera(bpy, location=(0, 0, 10), lens=50.0):
@@ -364,43 +365,128 @@ def test_uvs_come_from_the_uv_map_marked_for_rendering(bpy):
     assert uvs.min() == pytest.approx(0.5) and uvs.max() == pytest.approx(0.75)
 
 
-def test_add_and_mix_shaders_sum_emission_and_keep_the_dominant_surface(bpy):
-    def plane_with(mat, x):
-        bpy.ops.mesh.primitive_plane_add(size=1, location=(x, 0, 0))
-        bpy.context.object.data.materials.append(mat)
+def _combine(bpy, name, kind, first, second, fac=None):
+    """A material of an Add or Mix Shader of two shader nodes (kind, inputs)
+    or, for a tuple of three, a nested combination."""
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
 
-    def combine(name, kind, first, second, fac=None):
-        mat = bpy.data.materials.new(name)
-        tree = mat.node_tree
-        tree.nodes.clear()
-        out = tree.nodes.new("ShaderNodeOutputMaterial")
+    def build(kind, first, second, fac):
         node = tree.nodes.new(kind)
         shaders = [s for s in node.inputs if s.type == "SHADER"]
-        for socket, (shader, inputs) in zip(shaders, (first, second)):
-            source = tree.nodes.new(shader)
-            for key, value in inputs.items():
-                source.inputs[key].default_value = value
+        for socket, spec in zip(shaders, (first, second)):
+            if len(spec) == 4:
+                source = build(*spec)
+            else:
+                source = tree.nodes.new(spec[0])
+                for key, value in spec[1].items():
+                    source.inputs[key].default_value = value
             tree.links.new(source.outputs[0], socket)
         if fac is not None:
             node.inputs["Fac"].default_value = fac
-        tree.links.new(node.outputs[0], out.inputs["Surface"])
-        return mat
+        return node
 
-    diffuse_red = ("ShaderNodeBsdfDiffuse", {"Color": (1, 0, 0, 1)})
-    emission = ("ShaderNodeEmission", {"Color": (1, 1, 1, 1), "Strength": 4.0})
-    glossy = ("ShaderNodeBsdfGlossy", {"Color": (1, 1, 1, 1)})
-    plane_with(combine("add", "ShaderNodeAddShader", emission, diffuse_red), 0)
-    plane_with(combine("mix_emit", "ShaderNodeMixShader", diffuse_red, emission, fac=0.25), 2)
-    plane_with(combine("mix_two", "ShaderNodeMixShader", diffuse_red, glossy, fac=0.8), 4)
+    tree.links.new(build(kind, first, second, fac).outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _plane_with(bpy, mat, x):
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(x, 0, 0))
+    bpy.context.object.data.materials.append(mat)
+
+
+def _chain(materials, row):
+    """The rows of the mix starting at ``row``: (row, chance of picking it, scale)."""
+    rows, left = [], 1.0
+    while row >= 0:
+        stop = float(materials.mix_stop[row]) if materials.mix_next[row] >= 0 else 1.0
+        rows.append((row, left * stop, float(materials.mix_scale[row])))
+        left *= 1.0 - stop
+        row = int(materials.mix_next[row])
+    return rows
+
+
+DIFFUSE_RED = ("ShaderNodeBsdfDiffuse", {"Color": (1, 0, 0, 1)})
+EMISSION = ("ShaderNodeEmission", {"Color": (1, 1, 1, 1), "Strength": 4.0})
+GLOSSY = ("ShaderNodeBsdfGlossy", {"Color": (1, 1, 1, 1)})
+
+
+def test_add_and_mix_shaders_sum_emission_and_weigh_the_surface(bpy):
+    _plane_with(bpy, _combine(bpy, "add", "ShaderNodeAddShader", EMISSION, DIFFUSE_RED), 0)
+    _plane_with(bpy, _combine(bpy, "mix_emit", "ShaderNodeMixShader", DIFFUSE_RED, EMISSION, fac=0.25), 2)
     scene = _export(bpy)
     m = scene.materials
-    add, mix_emit, mix_two = (m.names.index(n) for n in ("add", "mix_emit", "mix_two"))
+    add, mix_emit = (m.names.index(n) for n in ("add", "mix_emit"))
     np.testing.assert_allclose(m.base_color[add], (1, 0, 0))
     np.testing.assert_allclose(m.emission[add], (4, 4, 4))
-    np.testing.assert_allclose(m.base_color[mix_emit], (0.75, 0, 0))
+    assert _chain(m, add) == [(add, 1.0, 1.0)]
+    # one surface at weight 0.75: no pick, its BSDF scaled
+    np.testing.assert_allclose(m.base_color[mix_emit], (1, 0, 0))
     np.testing.assert_allclose(m.emission[mix_emit], (1, 1, 1))
-    assert m.metallic[mix_two] == 1.0  # the glossy side weighs 0.8
-    assert any("mix_two" in w and "larger weight" in w for w in scene.warnings)
+    assert _chain(m, mix_emit) == [(mix_emit, 1.0, 0.75)]
+    assert not scene.warnings
+
+
+def test_a_mix_of_surfaces_becomes_a_chain_of_rows_picked_by_weight(bpy):
+    _plane_with(bpy, _combine(bpy, "mix_two", "ShaderNodeMixShader", DIFFUSE_RED, GLOSSY, fac=0.8), 0)
+    # Mix(Add(diffuse, glossy), transparent): weights 0.4, 0.4, 0.6 of a total 1.4
+    nested = ("ShaderNodeAddShader", DIFFUSE_RED, GLOSSY, None)
+    transparent = ("ShaderNodeBsdfTransparent", {})
+    _plane_with(bpy, _combine(bpy, "nested", "ShaderNodeMixShader", nested, transparent, fac=0.6), 2)
+    scene = _export(bpy)
+    m = scene.materials
+    two, nested_row = m.names.index("mix_two"), m.names.index("nested")
+    (first, p0, s0), (second, p1, s1) = _chain(m, two)
+    assert first == two and m.metallic[first] == 0.0 and m.metallic[second] == 1.0
+    assert (p0, p1, s0, s1) == pytest.approx((0.2, 0.8, 1.0, 1.0))
+    rows = _chain(m, nested_row)
+    assert [p for _, p, _ in rows] == pytest.approx([0.4 / 1.4, 0.4 / 1.4, 0.6 / 1.4])
+    assert [s for _, _, s in rows] == pytest.approx([1.4] * 3)
+    assert [float(m.alpha[r]) for r, _, _ in rows] == [1.0, 1.0, 0.0]
+    # the triangles use the first row; the others are reached through it
+    assert set(scene.material_ids.tolist()) == {two, nested_row}
+    assert scene.has_mix() and scene.has_alpha() and not scene.warnings
+
+
+def test_an_image_on_a_mix_fac_picks_between_two_surfaces(bpy):
+    mat = _combine(bpy, "masked", "ShaderNodeMixShader", DIFFUSE_RED, GLOSSY, fac=0.3)
+    tree = mat.node_tree
+    mask = bpy.data.images.new("mask", 2, 1)
+    mask.colorspace_settings.name = "Non-Color"
+    mask.pixels = [0, 0, 0, 1, 1, 1, 1, 1]
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = mask
+    tree.links.new(tex.outputs["Color"], tree.nodes["Mix Shader"].inputs["Fac"])
+    _plane_with(bpy, mat, 0)
+    scene = _export(bpy)
+    m = scene.materials
+    row = m.names.index("masked")
+    assert m.mix_texture[row] == 0 and m.mix_channel[row] == TEXTURE_LUMINANCE
+    assert m.mix_next[row] > row and m.metallic[m.mix_next[row]] == 1.0
+    np.testing.assert_allclose(scene.textures[0][0, :, 0], [0, 1])
+    assert scene.has_textures() and not scene.warnings
+
+
+def test_a_material_edit_that_grows_its_mix_keeps_its_row(bpy):
+    from blender_addon.export.materials import MaterialTable
+
+    mat = _combine(bpy, "growing", "ShaderNodeMixShader", DIFFUSE_RED, GLOSSY, fac=0.5)
+    table = MaterialTable()
+    row = table.index(mat)
+    tree = mat.node_tree
+    add = tree.nodes.new("ShaderNodeAddShader")
+    glass = tree.nodes.new("ShaderNodeBsdfGlass")
+    tree.links.new(tree.nodes["Glossy BSDF"].outputs[0], add.inputs[0])
+    tree.links.new(glass.outputs[0], add.inputs[1])
+    tree.links.new(add.outputs[0], tree.nodes["Mix Shader"].inputs[2])
+    table.forget(mat.name_full)
+    assert table.index(mat) == row
+    m = Materials.make(table.rows)
+    chain = _chain(m, row)
+    assert len(chain) == 3 and all(a < b for (a, _, _), (b, _, _) in zip(chain, chain[1:]))
+    assert sum(p for _, p, _ in chain) == pytest.approx(1.0)
 
 
 def test_non_color_and_float_images_stay_linear(bpy):

@@ -1,7 +1,8 @@
 """Materials as Cycles renders them: a smooth sphere of each Principled
 setting (rough metals and plastics, the specular layer, rough glass), the
-Glossy and Glass nodes, and textures on Roughness, Metallic and a normal map, under a small point light and under a uniform
-world, rendered by Cycles and by GPU GI's path tracer in the same process.
+Glossy and Glass nodes, textures on Roughness, Metallic and a normal map,
+and Mix and Add Shaders (with a Transparent BSDF through a textured Fac),
+under a small point light and under a uniform world, rendered by Cycles and by GPU GI's path tracer in the same process.
 
 Image means agree within 3% per channel; the per-pixel error on display
 values (Reinhard, then sRGB) stays within DISPLAY_TOLERANCE, which covers
@@ -33,6 +34,9 @@ MATERIALS = {
     "glass_node": dict(node="ShaderNodeBsdfGlass", roughness=0.2),
     "textured": dict(textured="values"),
     "normal_map": dict(textured="normals"),
+    "mix": dict(mixed="ShaderNodeMixShader"),
+    "add": dict(mixed="ShaderNodeAddShader"),
+    "cutout": dict(mixed="cutout"),
 }
 BASE = (0.8, 0.45, 0.2, 1.0)
 
@@ -71,12 +75,50 @@ def _textured(bpy, mat, what):
     return mat
 
 
+def _mixed(bpy, mat, how):
+    """A Mix Shader (Fac 0.4) or an Add Shader of a Diffuse BSDF and a
+    rough Glossy BSDF, or ("cutout") a Principled BSDF mixed with a
+    Transparent BSDF by stripes of an image on the Fac."""
+    tree = mat.node_tree
+    out = tree.nodes["Material Output"]
+    if how == "cutout":
+        node = tree.nodes["Principled BSDF"]
+        node.inputs["Base Color"].default_value = BASE
+        mix = tree.nodes.new("ShaderNodeMixShader")
+        transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
+        stripes = bpy.data.images.new("stripes", 8, 1)
+        stripes.colorspace_settings.name = "Non-Color"
+        stripes.pixels = [c for i in range(8) for c in ((1.0,) * 3 if i % 2 else (0.2,) * 3) + (1.0,)]
+        tex = tree.nodes.new("ShaderNodeTexImage")
+        tex.image = stripes
+        tree.links.new(tex.outputs["Color"], mix.inputs["Fac"])
+        tree.links.new(transparent.outputs[0], mix.inputs[1])
+        tree.links.new(node.outputs[0], mix.inputs[2])
+        tree.links.new(mix.outputs[0], out.inputs["Surface"])
+        return mat
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    diffuse, glossy = tree.nodes.new("ShaderNodeBsdfDiffuse"), tree.nodes.new("ShaderNodeBsdfGlossy")
+    diffuse.inputs["Color"].default_value = BASE
+    glossy.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.3
+    combine = tree.nodes.new(how)
+    shaders = [socket for socket in combine.inputs if socket.type == "SHADER"]
+    tree.links.new(diffuse.outputs[0], shaders[0])
+    tree.links.new(glossy.outputs[0], shaders[1])
+    if how == "ShaderNodeMixShader":
+        combine.inputs["Fac"].default_value = 0.4
+    tree.links.new(combine.outputs[0], out.inputs["Surface"])
+    return mat
+
+
 def _material(bpy, name, spec):
     mat = bpy.data.materials.new(name)
     tree = mat.node_tree
     spec = dict(spec)
     if "textured" in spec:
         return _textured(bpy, mat, spec["textured"])
+    if "mixed" in spec:
+        return _mixed(bpy, mat, spec["mixed"])
     node_kind = spec.pop("node", None)
     if node_kind is None:
         node = tree.nodes["Principled BSDF"]

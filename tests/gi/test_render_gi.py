@@ -7,42 +7,17 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scenes_py import camera_looking_down, make_scene, on_device, quad
+from scenes_py import box_scene, on_device
 
 from gpu_core.device.layout import float4_rows
 from gpu_core.gi import cut, gather, shading_points
 from gpu_core.gi.cache import outliers
 from gpu_core.renderer import Renderer
-from gpu_core.scene import LIGHT_POINT, Lights, Materials
 from gpu_core.settings import RenderSettings
 
 # small and quick: a few thousand photons and cache points at 24 x 24 pixels
 GI = RenderSettings(mode="gi", samples=4, global_photons=60_000, caustic_photons=60_000, photon_k=40,
                     cache_seeds=150, gather_rays=64, cut_delta=0.25)
-
-
-def box_scene(albedo=0.5, power=100.0, size=2.0, offset=(0.0, 0.0, 0.0), mirror=False, light=True):
-    """A closed cube seen from inside, a point light in it; optionally a
-    mirror panel on the floor. ``offset`` moves everything."""
-    h = size / 2
-    faces = [quad((0, 0, -h), size), quad((0, 0, h), size, flip=True),
-             quad((0, -h, 0), size, normal_axis=1), quad((0, h, 0), size, normal_axis=1, flip=True),
-             quad((-h, 0, 0), size, normal_axis=0), quad((h, 0, 0), size, normal_axis=0, flip=True)]
-    tris = np.concatenate(faces)
-    ids = [0] * len(tris)
-    mats = [dict(base_color=(albedo,) * 3)]
-    if mirror:
-        tris = np.concatenate([tris, quad((0.3 * size, 0, -h + 0.01 * size), 0.4 * size)])
-        ids += [1, 1]
-        mats.append(dict(base_color=(0.9,) * 3, metallic=1.0, roughness=0.0))
-    tris = tris + np.asarray(offset)
-    lights = [dict(kind=LIGHT_POINT, position=np.asarray((0.15, 0.1, 0.3)) * size + offset,
-                   power=(power,) * 3)] if light else []
-    camera = camera_looking_down(height=0.45 * size, half_width=0.5 * size, size=24,
-                                 center=(offset[0], offset[1]))
-    camera.matrix[2, 3] += offset[2]
-    camera.clip_start, camera.clip_end = 1e-3 * size, 10 * size
-    return make_scene(tris, np.array(ids, np.int32), Materials.make(mats), Lights.make(lights), camera)
 
 
 def rgb(result):
