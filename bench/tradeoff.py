@@ -23,7 +23,7 @@ display error (no other configuration both faster and closer), and the
 target line whether GI reaches Cycles' 64-sample error faster.
 
     python bench/tradeoff.py [--scenes cornell_box box_torus caustics]
-        [--size 64] [--reference-samples 4096] [--repeats 3] [--quick]
+        [--size 64] [--reference-samples 4096] [--repeats 3] [--quick] [--tag NAME]
 """
 
 from __future__ import annotations
@@ -207,6 +207,7 @@ def main() -> None:
     parser.add_argument("--reference-samples", type=int, default=4096)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="64 px, one repeat")
+    parser.add_argument("--tag", default="", help="suffix of the result files, so a run of other scenes keeps them")
     args = parser.parse_args()
     if args.quick:
         args.size, args.repeats = 64, 1
@@ -230,7 +231,7 @@ def main() -> None:
         print("\n".join(lines[-len(scene_rows) - 2:]), flush=True)
         rows += scene_rows
     # the 64 px run is the README's first table; other sizes get their own files
-    suffix = "_quick" if args.quick else "" if args.size == 64 else f"_{args.size}"
+    suffix = ("_quick" if args.quick else "" if args.size == 64 else f"_{args.size}") + (f"_{args.tag}" if args.tag else "")
     write_results(f"tradeoff{suffix}", rows, lines)
     figure = FIGURE.replace(".png", f"{suffix}.png")
     plot(rows, figure)

@@ -3,7 +3,7 @@
     python blend_scenes/build_scenes.py [--out DIR] [--only NAME ...]
 
 Every scene uses only what the exporter supports (Principled BSDF, Diffuse,
-Glossy, Glass and Emission shaders, the world Background) so Cycles and GPU GI
+Glossy, Glass and Emission shaders, Mix Shader, the world Background) so Cycles and GPU GI
 render the same thing. Units are metres and watts; powers are chosen so each
 scene is well exposed in Cycles with the AgX view (see check_exposure.py).
 The render engine is GPU GI when the add-on is registered in this process,
@@ -254,6 +254,41 @@ def light_emission():
     light_scene("light_emission", panel)
 
 
+def user_content():
+    """What a user's scene is mostly made of: default-like Principled BSDFs
+    (roughness 0.5, the specular layer on), a glossy floor, rough metals, a
+    plastic, a Mix Shader of a Diffuse and a Glossy BSDF, lit by an area
+    light, a sun and the world, in an open corner of a room."""
+    reset("user_content")
+    floor = principled("Glossy Floor", (0.45, 0.4, 0.35), roughness=0.25)
+    wall = principled("Wall", (0.8, 0.78, 0.72))
+    plane(6, mat=floor, name="Floor")
+    plane(6, (0, 2, 3), (math.pi / 2, 0, 0), wall, "Back Wall")
+    plane(6, (-2, 0, 3), (0, math.pi / 2, 0), wall, "Left Wall")
+    sphere(0.45, (-0.9, 0.6, 0.45), principled("Brushed Steel", (0.8, 0.8, 0.8), metallic=1.0, roughness=0.3),
+           "Steel Sphere")
+    sphere(0.4, (0.2, 0.9, 0.4), principled("Rough Copper", (0.95, 0.64, 0.54), metallic=1.0, roughness=0.55),
+           "Copper Sphere")
+    sphere(0.35, (0.9, 0.1, 0.35), principled("Red Plastic", (0.7, 0.1, 0.08), roughness=0.35), "Plastic Sphere")
+    mixed = bpy.data.materials.new("Lacquer")
+    tree = mixed.node_tree
+    tree.nodes.clear()
+    out, mix = tree.nodes.new("ShaderNodeOutputMaterial"), tree.nodes.new("ShaderNodeMixShader")
+    diffuse, glossy = tree.nodes.new("ShaderNodeBsdfDiffuse"), tree.nodes.new("ShaderNodeBsdfGlossy")
+    diffuse.inputs["Color"].default_value = (0.1, 0.25, 0.6, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.15
+    mix.inputs["Fac"].default_value = 0.3
+    tree.links.new(diffuse.outputs[0], mix.inputs[1])
+    tree.links.new(glossy.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    cube(0.5, (-0.1, -0.5, 0.25), mixed, rotation=(0, 0, math.radians(30)), name="Lacquer Cube")
+    light("AREA", (0.8, -0.6, 2.6), 45.0, rotation=(math.radians(20), math.radians(15), 0), shape="RECTANGLE",
+          size=1.2, size_y=0.6)
+    light("SUN", (0, 0, 5), 0.6, rotation=(math.radians(50), 0, math.radians(40)), angle=math.radians(5))
+    set_world(bpy.context.scene, (0.5, 0.6, 0.8), 0.15)
+    camera((1.2, -1.8, 0.9), (-0.3, 0.45, 0.4), lens=26)
+
+
 def large_scene():
     """Over 100k triangles kept small on disk: a Suzanne with an unapplied
     Subdivision Surface modifier, instanced nine times through a collection."""
@@ -294,6 +329,7 @@ SCENES = {
     "light_world": light_world,
     "light_emission": light_emission,
     "large_scene": large_scene,
+    "user_content": user_content,
 }
 
 

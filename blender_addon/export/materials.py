@@ -51,6 +51,7 @@ class MaterialTable:
         caller across tables (an image is read once until it is edited)."""
         self.rows: list[dict] = [{**DEFAULT_ROW, "name": "default"}]
         self.textures: list[np.ndarray] = []
+        self.texture_closest: list[bool] = []  # per texture: the node's Closest interpolation
         self.exported = 0  # materials read from Blender so far
         self._index: dict = {None: 0}
         self._chains: dict = {}  # material -> rows after its first that hold the other surfaces of its mix
@@ -302,23 +303,32 @@ class MaterialTable:
         self._warn(f"material '{name}': '{source}' on {socket.node.name} > {socket.name} is not supported; used its value")
 
     def _texture(self, name: str, node) -> int:
-        """Index of the node's image in the texture list, -1 if it has no pixels."""
+        """Index of the node's image, filtered as the node says (Closest or
+        Linear), in the texture list; -1 if it has no pixels."""
         image = node.image.original if node.image is not None else None  # pixels live on the original
         if image is None:
             self._warn(f"material '{name}': {node.name} has no image; used the socket's colour")
             return -1
         if node.inputs["Vector"].is_linked:
             self._warn(f"material '{name}': texture coordinates on {node.name} are not supported; used the UV map")
-        key = image.name_full
+        if node.interpolation not in ("Linear", "Closest"):
+            self._warn(f"material '{name}': {node.interpolation} interpolation on {node.name} is not supported; "
+                       "used Linear")
+        if node.extension != "REPEAT":
+            self._warn(f"material '{name}': the {node.extension.lower()} extension on {node.name} is not supported; "
+                       "used Repeat")
+        closest = node.interpolation == "Closest"
+        key = (image.name_full, closest)
         if key not in self._images:
-            if key not in self._pixels:
-                self._pixels[key] = image_pixels(image)
-            pixels = self._pixels[key]
+            if image.name_full not in self._pixels:
+                self._pixels[image.name_full] = image_pixels(image)
+            pixels = self._pixels[image.name_full]
             if pixels is None:
                 self._warn(f"material '{name}': image '{image.name}' has no pixels (missing file?); used the socket's colour")
                 return -1
             self._images[key] = len(self.textures)
             self.textures.append(pixels)
+            self.texture_closest.append(closest)
         return self._images[key]
 
 

@@ -208,7 +208,7 @@ class SceneSync:
             edits.add("geometry")
             geometry = _concatenated([instances[key] for key in order])
         materials, lights = Materials.make(table.rows), Lights.make(light_rows)
-        if last is None or not (_same_columns(materials, last.materials) and _same_textures(table.textures, last.textures)):
+        if last is None or not (_same_columns(materials, last.materials) and _same_textures(table, last)):
             edits.add("materials")
         else:
             materials = last.materials
@@ -222,7 +222,8 @@ class SceneSync:
             world_color = last.world_color
         scene = Scene(triangles=geometry[0], normals=geometry[1], uvs=geometry[2], material_ids=geometry[3],
                       materials=materials, lights=lights, camera=camera, world_color=world_color,
-                      textures=list(table.textures), warnings=list(dict.fromkeys(warnings)))
+                      textures=list(table.textures), texture_closest=list(table.texture_closest),
+                      warnings=list(dict.fromkeys(warnings)))
         return scene, edits
 
 
@@ -248,8 +249,11 @@ def _same_columns(a, b) -> bool:
     return all(np.array_equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(a) if f.name != "names")
 
 
-def _same_textures(a: list, b: list) -> bool:
-    return len(a) == len(b) and all(x is y or np.array_equal(x, y) for x, y in zip(a, b))
+def _same_textures(table: MaterialTable, last: Scene) -> bool:
+    """The table's textures are the last scene's: the same pixels and filters."""
+    a, b = table.textures, last.textures
+    return (len(a) == len(b) and all(x is y or np.array_equal(x, y) for x, y in zip(a, b))
+            and list(table.texture_closest) == list(last.texture_closest))
 
 
 def _warn_object_settings(obj, warnings: list[str]) -> None:

@@ -128,7 +128,8 @@ CAMERA = Struct("Camera", "the camera", [
 ])
 
 TEXTURE_INFO = Struct("TextureInfo", "a texture's place in the shared float4 atlas", [
-    ("offset", "int"), ("width", "int"), ("height", "int"), ("pad", "int"),
+    ("offset", "int"), ("width", "int"), ("height", "int"),
+    ("closest", "int", "1: the nearest texel (Closest interpolation), 0: bilinear (Linear)"),
 ])
 
 POINT_NODE = Struct("PointNode", "a point-tree node's payload, at its preorder index; the points of a "

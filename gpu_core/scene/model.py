@@ -243,6 +243,7 @@ class Scene:
     camera: Camera
     world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
     textures: list[np.ndarray] = field(default_factory=list)  # (H, W, 4) float32, linear
+    texture_closest: list[bool] = field(default_factory=list)  # per texture: the nearest texel, not bilinear
     warnings: list[str] = field(default_factory=list)
     report: ValidationReport = field(default_factory=ValidationReport)
 
@@ -346,7 +347,8 @@ def part_digests(scene: Scene, parts=PARTS) -> dict[str, bytes]:
     m, lights, camera = scene.materials, scene.lights, scene.camera
     arrays = {
         "geometry": lambda: [scene.triangles, scene.normals, scene.uvs, scene.material_ids],
-        "materials": lambda: [getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures),
+        "materials": lambda: ([getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures)
+                              + [np.asarray(scene.texture_closest, bool)]),
         "lights": lambda: [getattr(lights, f.name) for f in fields(Lights) if f.name != "names"],
         "world": lambda: [scene.world_color],
         "camera": lambda: [np.asarray(camera.matrix), np.asarray(camera.window),

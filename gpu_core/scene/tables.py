@@ -51,7 +51,7 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
         emit_tris, emit_cdf = old.emit_tris, old.emit_cdf
     if old is None or "materials" in changed:
         materials = material_table(scene)
-        atlas, infos = texture_atlas(scene.textures)
+        atlas, infos = texture_atlas(scene.textures, scene.texture_closest)
     else:
         materials, atlas, infos = old.materials, old.atlas, old.texture_infos
     if old is None or changed & {"lights", "geometry", "materials"}:
@@ -277,8 +277,9 @@ def texels(scene: Scene) -> int:
     return sum(int(np.prod(np.shape(t)[:2])) for t in scene.textures)
 
 
-def texture_atlas(textures: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """All textures in one float4 array, and each one's offset and size."""
+def texture_atlas(textures: list[np.ndarray], closest=()) -> tuple[np.ndarray, np.ndarray]:
+    """All textures in one float4 array, and each one's offset, size and
+    filter (``closest[i]``: the nearest texel; bilinear where not given)."""
     infos = np.zeros(max(len(textures), 1), TEXTURE_INFO_DTYPE)
     chunks, offset = [], 0
     for i, tex in enumerate(textures):
@@ -290,7 +291,7 @@ def texture_atlas(textures: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         if img.shape[2] == 3:
             img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], axis=2)
         img = np.nan_to_num(img[..., :4], nan=0.0, posinf=0.0, neginf=0.0)
-        infos[i] = (offset, img.shape[1], img.shape[0], 0)
+        infos[i] = (offset, img.shape[1], img.shape[0], int(bool(closest[i])) if i < len(closest) else 0)
         chunks.append(img.reshape(-1, 4))
         offset += img.shape[0] * img.shape[1]
     atlas = np.concatenate(chunks) if chunks else np.zeros((1, 4), np.float32)

@@ -43,7 +43,8 @@ def validate(scene: Scene, memo: "GeometryMemo | None" = None) -> Scene:
     report.messages = warnings
     return Scene(triangles=tris, normals=normals, uvs=uvs, material_ids=mat_ids,
                  materials=materials, lights=lights, camera=scene.camera, world_color=world,
-                 textures=list(scene.textures), warnings=warnings, report=report)
+                 textures=list(scene.textures), texture_closest=list(scene.texture_closest), warnings=warnings,
+                 report=report)
 
 
 _GEOMETRY_COUNTS = ("dropped_nonfinite_triangles", "dropped_degenerate_triangles", "repaired_material_ids",

@@ -9,11 +9,13 @@ inline float4 Texture_texel(const __global float4 *atlas, TextureInfo t, int x, 
     return atlas[t.offset + y * t.width + x];
 }
 
-/* Bilinear sample at uv (v = 0 is the bottom row, as Blender stores images). */
+/* Sample at uv (v = 0 is the bottom row, as Blender stores images):
+ * bilinear (Linear), or the texel uv falls in (Closest). */
 inline float4 Texture_sample(const __global float4 *atlas, const __global TextureInfo *infos, int id, float2 uv) {
     TextureInfo t = infos[id];
     /* wrap uv into [0, 1) first, so huge coordinates stay in integer range */
     float2 w = uv - floor(uv);
+    if (t.closest) return Texture_texel(atlas, t, (int)(w.x * t.width), (int)(w.y * t.height));
     float fx = w.x * t.width - 0.5f, fy = w.y * t.height - 0.5f;
     int x0 = (int)floor(fx), y0 = (int)floor(fy);
     float ax = fx - x0, ay = fy - y0;

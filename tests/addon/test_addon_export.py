@@ -509,6 +509,23 @@ def test_non_color_and_float_images_stay_linear(bpy):
         np.testing.assert_allclose(pixels[0, 0], values, atol=1.0 / 255)
 
 
+def test_an_image_keeps_each_nodes_interpolation(bpy):
+    image = bpy.data.images.new("pixel_art", 2, 2)
+    for x, (interpolation, extension) in enumerate((("Closest", "REPEAT"), ("Linear", "REPEAT"),
+                                                     ("Cubic", "EXTEND"))):
+        bpy.ops.mesh.primitive_plane_add(size=1, location=(2 * x, 0, 0))
+        mat, node = _material(bpy, "ShaderNodeBsdfDiffuse")
+        tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+        tex.image, tex.interpolation, tex.extension = image, interpolation, extension
+        mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Color"])
+        bpy.context.object.data.materials.append(mat)
+    scene = _export(bpy)
+    # one texture per filter: Closest on its own, Linear shared with the Cubic node (drawn Linear)
+    assert sorted(scene.texture_closest) == [False, True] and len(scene.textures) == 2
+    assert any("Cubic interpolation" in w and "used Linear" in w for w in scene.warnings)
+    assert any("extend extension" in w and "used Repeat" in w for w in scene.warnings)
+
+
 def test_light_power_follows_exposure_temperature_and_normalize(bpy):
     point = _light(bpy, "POINT", energy=10, exposure=2.0, color=(1, 1, 1))
     warm = _light(bpy, "POINT", energy=10, use_temperature=True, temperature=3000.0, color=(1, 1, 1))

@@ -119,3 +119,20 @@ def test_normal_maps_at_the_extremes_stay_finite(device):
             scene.uvs[:] = 0.25
         img = render(device, scene, samples=2)
         assert np.isfinite(img).all() and (img >= 0).all()
+
+
+@pytest.mark.parametrize("closest", [False, True], ids=["linear", "closest"])
+def test_a_closest_texture_reads_the_texel_a_point_falls_in(device, closest):
+    # two texels, 0.2 and 0.8 grey; the view spans u 0.45..0.55 around their edge at 0.5
+    dark, bright = (render(device, with_uvs(lit_plane(base_color=(grey,) * 3))) for grey in (0.2, 0.8))
+    scene = with_uvs(lit_plane(base_color=(1.0, 1.0, 1.0), texture_id=0))
+    scene.textures = [np.array([[[0.2, 0.2, 0.2, 1.0], [0.8, 0.8, 0.8, 1.0]]], np.float32)]
+    scene.texture_closest = [closest]
+    image = render(device, scene)
+    left, right = slice(0, SIZE // 2 - 1), slice(SIZE // 2 + 1, SIZE)
+    if closest:
+        np.testing.assert_allclose(image[:, left], dark[:, left], rtol=1e-4, atol=1e-7)
+        np.testing.assert_allclose(image[:, right], bright[:, right], rtol=1e-4, atol=1e-7)
+    else:
+        # bilinear between the texel centres at u = 0.25 and 0.75: greys of 0.44-0.56 here
+        assert (image[:, left] > 1.8 * dark[:, left]).all() and (image[:, right] < 0.75 * bright[:, right]).all()

@@ -23,7 +23,7 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
-SCENES = ("cornell_box", "box_torus")
+SCENES = ("cornell_box", "box_torus", "user_content")
 BOUNCES = dict(max_bounces=64, diffuse_bounces=32, glossy_bounces=32, transmission_bounces=32,
                transparent_max_bounces=32)
 
