@@ -79,7 +79,7 @@ def cycles(bpy, name: str, size: int, samples: int, repeats: int, direct_only: b
     times = []
     for _ in range(repeats):
         scene = open_scene(bpy, name, size)
-        configure(scene, size, samples)
+        configure(scene, size, samples, box_filter=True)
         scene.cycles.use_denoising = False
         if direct_only:
             scene.cycles.max_bounces = 0

@@ -109,7 +109,7 @@ def cycles_rate(bpy, scene, samples: int) -> float:
     from make_references import configure
 
     size = scene.render.resolution_x
-    configure(scene, size, samples)
+    configure(scene, size, samples, box_filter=True)
     scene.cycles.use_denoising = False
     scene.cycles.max_bounces = 0
     times = [render(bpy, scene, "CYCLES")[1] for _ in range(3)]

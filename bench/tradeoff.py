@@ -1,8 +1,8 @@
 """Time against error: GPU GI's presets and knobs beside Cycles.
 
-For each scene, a high-sample Cycles render is the reference: the stored
-test reference at 64 px (tests/references/), else one rendered here once
-and kept in bench/results/. Then, in the same run: Cycles at 4..1024
+For each scene, a high-sample Cycles render with a 1-pixel box filter is
+the reference, rendered here once and kept in bench/results/ (the tests'
+stored references have Blender's default film instead). Then, in the same run: Cycles at 4..1024
 samples with and without its denoiser (set up like the reference: box
 filter, no clamp, no glossy filter, deep bounces), GPU GI's presets as
 rendered and denoised (Open Image Denoise from the albedo and normal
@@ -80,15 +80,13 @@ def errors(image: np.ndarray, reference: np.ndarray) -> dict:
 
 
 def cycles_settings(scene, samples: int, denoise: bool) -> None:
-    cycles_reference_settings(scene, scene.render.resolution_x, samples)
+    cycles_reference_settings(scene, scene.render.resolution_x, samples, box_filter=True)
     scene.cycles.use_denoising = denoise
 
 
 def reference(bpy, name: str, size: int, samples: int) -> np.ndarray:
-    """The scene rendered by Cycles at ``samples`` samples (stored or cached)."""
-    stored = os.path.join(ROOT, "tests", "references", f"{name}_{size}.npy")
-    if samples == 4096 and os.path.exists(stored):
-        return np.load(stored).astype(np.float64)
+    """The scene rendered by Cycles at ``samples`` samples with a 1-pixel box
+    filter, cached (the tests' stored references have Blender's default film)."""
     path = os.path.join(RESULTS, f"reference_{name}_{size}_{samples}.npy")
     if os.path.exists(path):
         return np.load(path)
