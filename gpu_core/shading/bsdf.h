@@ -42,6 +42,8 @@
 typedef struct {
     float3 t, b, n;       /* shading frame, n facing the viewer */
     float3 wo, ng;        /* local: towards the viewer, geometric normal on its side */
+    float3 smooth;        /* local: the normal before a normal map, on the viewer's side */
+    bool mapped;          /* a normal map moved the shading normal off the smooth one */
     float rough, alpha2;
     bool singular;
     float3 diffuse;       /* Lambert albedo (weights and layering applied) */
@@ -83,11 +85,12 @@ inline float Bsdf_reflect_probability(float3 r, float3 t) {
 
 /* The BSDF of material m (base: its colour, texture applied) seen from
  * direction wo_world (towards the viewer) at a surface with shading normal
- * ns and geometric normal ng (both on the viewer's side); `entering`: the
- * viewer is outside the object (by the wound normal). `sample`: the
- * lobes sampling may choose (BSDF_SAMPLE_*). */
-inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns, float3 ng, bool entering,
-                      int sample) {
+ * ns, the normal before a normal map `smooth` (ns without one) and
+ * geometric normal ng (all on the viewer's side); `entering`: the viewer is
+ * outside the object (by the wound normal). `sample`: the lobes sampling
+ * may choose (BSDF_SAMPLE_*). */
+inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns, float3 smooth, float3 ng,
+                      bool entering, int sample) {
     Bsdf f;
     f.sample = sample;
     f.n = dot(ns, wo_world) > 1e-6f ? ns : ng;
@@ -95,6 +98,8 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     f.wo = Bsdf_to_local(&f, wo_world);
     f.wo.z = fmax(f.wo.z, 1e-6f);
     f.ng = Bsdf_to_local(&f, ng);
+    f.smooth = Bsdf_to_local(&f, smooth);
+    f.mapped = dot(ns, smooth) < 1.0f - 1e-6f;
     float mu = f.wo.z;
     f.rough = clamp(m->roughness, 0.0f, 1.0f);
     float alpha = f.rough * f.rough;
@@ -164,6 +169,24 @@ inline bool Bsdf_has_smooth(const Bsdf *f) {
            (!f->singular && (f->w_specular > 0.0f || f->w_metal > 0.0f || f->w_glass > 0.0f));
 }
 
+/* Cycles' bump shadowing term for the light from local direction wi on a
+ * normal-mapped surface: nothing where wi and the mapped normal lie on
+ * different sides of the smooth surface (light would leak round to the
+ * back), and for the diffuse lobe the GGX shadowing of a roughness set by
+ * how far the map tilts the normal (Conty Estevez et al. 2019: "Bump Map
+ * Correction", on by default), which softens the terminator. */
+inline float Bsdf_bump_shadowing(const Bsdf *f, float3 wi, bool diffuse) {
+    if (!f->mapped) return 1.0f;
+    float cos_si = dot(f->smooth, wi), cos_sn = f->smooth.z;
+    if (cos_si * cos_sn * wi.z < 0.0f) return 0.0f;
+    if (!diffuse) return 1.0f;
+    float cos_i = fabs(cos_si), cos_d = fabs(cos_sn);
+    if (cos_d >= 1.0f || cos_i >= 1.0f) return 1.0f;
+    if (cos_i < 1e-6f) return 0.0f;
+    float alpha2 = clamp(0.125f * (1.0f / (cos_d * cos_d) - 1.0f), 0.0f, 1.0f);
+    return 1.0f / (1.0f + Microfacet_lambda(alpha2, cos_i));
+}
+
 /* f cos for the local direction wi over the evaluable lobes, split into
  * the diffuse part (*diffuse) and the glossy part (returned; transmission
  * included), and the pdf of sampling wi (Bsdf_sample). */
@@ -175,7 +198,7 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
     if (below != (dot(wi, f->ng) < 0.0f) || wi.z == 0.0f) return none; /* the normals disagree on the side */
     float3 wo = f->wo;
     if (!below) {
-        *diffuse = f->diffuse * (wi.z / PI_F);
+        *diffuse = f->diffuse * (wi.z / PI_F) * Bsdf_bump_shadowing(f, wi, true);
         *pdf += f->q[BSDF_DIFFUSE] * wi.z / PI_F;
         if (f->singular) return none;
         float lobe_pdf;
@@ -195,7 +218,7 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
             glossy += f->w_glass * v * r;
             *pdf += f->q[BSDF_GLASS] * lobe_pdf * Bsdf_reflect_probability(r, t);
         }
-        return glossy;
+        return glossy * Bsdf_bump_shadowing(f, wi, false);
     }
     if (f->singular || !(f->w_glass > 0.0f) || fabs(f->glass_eta - 1.0f) < 1e-4f) return none;
     float v, lobe_pdf;
@@ -204,7 +227,7 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
     float3 r, t;
     Bsdf_glass_fresnel(f, dot(wo, h), &r, &t);
     *pdf = f->q[BSDF_GLASS] * lobe_pdf * (1.0f - Bsdf_reflect_probability(r, t));
-    return f->w_glass * v * t;
+    return f->w_glass * v * t * Bsdf_bump_shadowing(f, wi, false);
 }
 
 /* Sample a direction: *wi (local), *weight = f cos / pdf over the lobes

@@ -9,7 +9,7 @@
 inline Bsdf BsdfCheck_make(const __global Material *m, float4 wo, int entering, int sample) {
     Material mat = *m;
     float3 n = (float3)(0.0f, 0.0f, 1.0f);
-    return Bsdf_make(&mat, mat.base_color.xyz, normalize(wo.xyz), n, n, entering != 0, sample);
+    return Bsdf_make(&mat, mat.base_color.xyz, normalize(wo.xyz), n, n, n, entering != 0, sample);
 }
 
 /* One sample per work item: direction (w = label), weight (w = pdf). */

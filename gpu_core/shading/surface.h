@@ -12,6 +12,7 @@ typedef struct {
     float3 p;      /* position */
     float3 ng;     /* geometric normal facing the incoming ray */
     float3 ns;     /* shading normal on the same side as ng */
+    float3 smooth; /* the interpolated normal (ns before a normal map) */
     float3 ng_raw; /* geometric normal as wound */
     float2 uv;
     int tri;
@@ -52,6 +53,7 @@ inline SurfacePoint Surface_at(const SceneView *sc, float3 dir, const Hit *hit) 
     float ls = length(ns);
     ns = ls > 1e-20f ? ns / ls : s.ng;
     s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
+    s.smooth = s.ns;
     s.uv = Surface_uv(sc, hit);
     s.tri = t;
     /* p is rounded like the largest vertex coordinate it was made from */
@@ -172,7 +174,7 @@ inline float3 Surface_textured(const SceneView *sc, Material *m, SurfacePoint *s
 inline Bsdf Surface_bsdf(const SurfacePoint *sp, const Material *m, float3 base, float3 dir, int sample) {
     /* the wound normal facing the ray means entering the object */
     bool entering = dot(sp->ng_raw, sp->ng) > 0.0f;
-    return Bsdf_make(m, base, -dir, sp->ns, sp->ng, entering, sample);
+    return Bsdf_make(m, base, -dir, sp->ns, sp->smooth, sp->ng, entering, sample);
 }
 
 /* Where a ray leaving sp along the world direction dir starts: above the

@@ -82,6 +82,13 @@ def normal_texel(normal):
     return np.array([[[*(0.5 * np.asarray(normal) + 0.5), 1.0]]], np.float32)
 
 
+def bump_shadowing(tilt, theta):
+    """Cycles' diffuse bump shadowing: GGX G1 at the light's angle theta to
+    the smooth normal, of alpha^2 = tan^2(tilt) / 8 for a map tilted by tilt."""
+    alpha2 = min(np.tan(tilt) ** 2 / 8, 1.0)
+    return 2.0 / (1.0 + np.sqrt(1.0 + alpha2 * np.tan(theta) ** 2))
+
+
 @pytest.mark.parametrize("azimuth", [0.0, np.pi / 2, 3 * np.pi / 4])
 def test_normal_map_tilted_toward_the_sun_receives_it_head_on(device, azimuth):
     theta = np.radians(50)
@@ -89,7 +96,8 @@ def test_normal_map_tilted_toward_the_sun_receives_it_head_on(device, azimuth):
     scene.textures = [normal_texel(toward)]
     flat, _ = sun_scene(azimuth, theta)
     full = ALBEDO / np.pi * 2.0
-    np.testing.assert_allclose(render(device, scene), full, rtol=0.01)
+    # head on, less the shadowing of a normal tilted 50 degrees (0.944)
+    np.testing.assert_allclose(render(device, scene), full * bump_shadowing(theta, theta), rtol=0.01)
     np.testing.assert_allclose(render(device, flat), full * np.cos(theta), rtol=0.01)
 
 
@@ -97,7 +105,22 @@ def test_normal_map_tilted_away_from_the_sun_receives_it_more_obliquely(device):
     theta, tilt = np.radians(20), np.radians(30)
     scene, _ = sun_scene(0.0, theta, normal_texture=0)
     scene.textures = [normal_texel((-np.sin(tilt), 0.0, np.cos(tilt)))]
-    np.testing.assert_allclose(render(device, scene), ALBEDO / np.pi * 2.0 * np.cos(theta + tilt), rtol=0.01)
+    expected = ALBEDO / np.pi * 2.0 * np.cos(theta + tilt) * bump_shadowing(tilt, theta)
+    np.testing.assert_allclose(render(device, scene), expected, rtol=0.01)
+
+
+def test_light_below_the_smooth_surface_does_not_reach_a_normal_mapped_one(device):
+    # smooth normals tilted 30 degrees toward -x, the map turning them 60 degrees back toward +x,
+    # a sun from +x 70 degrees from the zenith: above the facet and the mapped normal, below the
+    # smooth surface, where Cycles lets no light through
+    scene, _ = sun_scene(0.0, np.radians(70), normal_texture=0)
+    scene.normals[:] = (-np.sin(np.radians(30)), 0.0, np.cos(np.radians(30)))
+    scene.textures = [normal_texel((np.sin(np.radians(60)), 0.0, np.cos(np.radians(60))))]
+    assert render(device, scene).max() == 0.0
+    scene.materials.normal_texture[0] = -1  # the smooth normal alone: the light is behind it too
+    assert render(device, scene).max() == 0.0
+    scene.normals[:] = (0.0, 0.0, 1.0)  # flat: lit
+    assert render(device, scene).min() > 0.0
 
 
 @pytest.mark.parametrize("strength, texel", [(0.0, (0.6, 0.0, 0.8)), (1.0, (0.0, 0.0, 1.0))])
