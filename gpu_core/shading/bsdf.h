@@ -147,19 +147,22 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
                                                  : (float3)(0.0f);
     /* sampling weights: each lobe's albedo, estimated at the normal */
     for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = 0.0f;
-    if (sample & BSDF_SAMPLE_DIFFUSE) f.q[BSDF_DIFFUSE] = Bsdf_avg(f.diffuse);
-    if (sample & BSDF_SAMPLE_GLOSSY) {
-        if (f.w_specular > 0.0f)
-            f.q[BSDF_SPECULAR] = f.w_specular * Bsdf_avg(Microfacet_fresnel_remap(f.spec_f0, mu, f.spec_eta));
-        if (f.w_metal > 0.0f) f.q[BSDF_METAL] = f.w_metal * Bsdf_avg(Bsdf_metal_fresnel(&f, mu));
-        if (f.w_glass > 0.0f) {
-            float3 gr, gt;
-            Bsdf_glass_fresnel(&f, mu, &gr, &gt);
-            f.q[BSDF_GLASS] = f.w_glass * Bsdf_avg(gr + gt);
-        }
+    f.q[BSDF_DIFFUSE] = Bsdf_avg(f.diffuse);
+    if (f.w_specular > 0.0f)
+        f.q[BSDF_SPECULAR] = f.w_specular * Bsdf_avg(Microfacet_fresnel_remap(f.spec_f0, mu, f.spec_eta));
+    if (f.w_metal > 0.0f) f.q[BSDF_METAL] = f.w_metal * Bsdf_avg(Bsdf_metal_fresnel(&f, mu));
+    if (f.w_glass > 0.0f) {
+        float3 gr, gt;
+        Bsdf_glass_fresnel(&f, mu, &gr, &gt);
+        f.q[BSDF_GLASS] = f.w_glass * Bsdf_avg(gr + gt);
     }
     float total = f.q[0] + f.q[1] + f.q[2] + f.q[3];
     for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = total > 0.0f ? f.q[i] / total : 0.0f;
+    /* a lobe sampling may not choose keeps its chance, which ends the path
+     * there (its light comes another way or not at all): a glossy layer over
+     * a diffuse base goes on only as often as it reflects */
+    if (!(sample & BSDF_SAMPLE_DIFFUSE)) f.q[BSDF_DIFFUSE] = 0.0f;
+    if (!(sample & BSDF_SAMPLE_GLOSSY)) f.q[BSDF_SPECULAR] = f.q[BSDF_METAL] = f.q[BSDF_GLASS] = 0.0f;
     return f;
 }
 
@@ -231,14 +234,15 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
 }
 
 /* Sample a direction: *wi (local), *weight = f cos / pdf over the lobes
- * sampling may choose, *pdf (0 for a singular direction). Returns its BSDF_LABEL_* flags, 0 when the sample
- * is lost (no lobe, below the surface, total internal reflection). */
+ * sampling may choose, *pdf (0 for a singular direction). Returns its
+ * BSDF_LABEL_* flags, 0 when the sample is lost (no lobe, a lobe sampling
+ * may not choose, below the surface, total internal reflection). */
 inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3, float3 *wi, float3 *weight,
                        float *pdf) {
     int lobe = 0;
     float acc = f->q[0];
     while (lobe < BSDF_LOBES - 1 && u_lobe >= acc) acc += f->q[++lobe];
-    if (!(f->q[lobe] > 0.0f)) return 0;
+    if (u_lobe >= acc || !(f->q[lobe] > 0.0f)) return 0;
     float3 wo = f->wo, one = (float3)(1.0f);
     int label;
     if (lobe == BSDF_DIFFUSE) {
