@@ -40,7 +40,7 @@ class Surface:
 
     leaves: list = field(default_factory=list)  # (weight, row)
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    fac: dict | None = None  # a Mix's Fac texture over exactly two leaves: mix_texture, mix_channel
+    fac: dict | None = None  # a Mix's Fac texture over exactly two leaves: mix_texture, mix_channel, mix_stop
 
 
 class MaterialTable:
