@@ -104,6 +104,12 @@ class Materials:
     def __len__(self) -> int:
         return len(self.base_color)
 
+    def next_rows(self) -> np.ndarray:
+        """Each row's next row in its mix's chain: mix_next where it is a
+        later row (a chain only runs forward, so it ends), else -1."""
+        rows = np.arange(len(self))
+        return np.where((self.mix_next > rows) & (self.mix_next < len(self)), self.mix_next, -1)
+
 
 @dataclass
 class Lights:
@@ -254,22 +260,19 @@ class Scene:
     def used_materials(self) -> np.ndarray:
         """Indices of the materials some triangle uses, with the rows of
         their mixes (chains along mix_next, forward only as the table's)."""
-        used = set(np.unique(self.material_ids).tolist())
-        rows, following = len(self.materials), self.materials.mix_next
-        frontier = list(used)
-        while frontier:
-            row = frontier.pop()
-            nxt = int(following[row]) if 0 <= row < rows else -1
-            if row < nxt < rows and nxt not in used:
-                used.add(nxt)
-                frontier.append(nxt)
-        return np.array(sorted(used), np.int64)
+        following = self.materials.next_rows()
+        used = np.unique(self.material_ids)
+        while True:
+            nxt = following[used[(used >= 0) & (used < len(following))]]
+            more = np.union1d(used, nxt[nxt >= 0])
+            if len(more) == len(used):
+                return used
+            used = more
 
     def has_mix(self) -> bool:
         """Whether a triangle's material mixes surfaces (a chain of rows)."""
-        m, rows = self.materials, np.unique(self.material_ids)
-        rows = rows[(rows >= 0) & (rows < len(m))]
-        return bool(((m.mix_next[rows] > rows) & (m.mix_next[rows] < len(m))).any())
+        following, rows = self.materials.next_rows(), np.unique(self.material_ids)
+        return bool((following[rows[(rows >= 0) & (rows < len(following))]] >= 0).any())
 
     def has_specular(self) -> bool:
         """Whether a triangle is near-specular metal or glass (roughness

@@ -92,9 +92,7 @@ def material_table(scene: Scene) -> np.ndarray:
     table["metallic_channel"] = np.clip(m.metallic_channel, 0, TEXTURE_LUMINANCE)
     table["normal_texture"] = _texture_index(m.normal_texture, scene)
     table["normal_strength"] = np.clip(np.nan_to_num(m.normal_strength, nan=1.0), 0.0, 1e3)
-    # a chain of a mix only runs forward, so it ends
-    rows = np.arange(len(m))
-    table["mix_next"] = np.where((m.mix_next > rows) & (m.mix_next < len(m)), m.mix_next, -1)
+    table["mix_next"] = m.next_rows()
     table["mix_stop"] = np.where(table["mix_next"] >= 0, np.clip(np.nan_to_num(m.mix_stop, nan=1.0), 0.0, 1.0), 1.0)
     table["mix_scale"] = np.clip(np.nan_to_num(m.mix_scale, nan=1.0), 0.0, 1e3)
     table["mix_texture"] = np.where(table["mix_next"] >= 0, _texture_index(m.mix_texture, scene), -1)
