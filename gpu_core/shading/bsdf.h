@@ -11,8 +11,8 @@
  *                reflection of index eta' (Specular IOR Level) over
  *   diffuse      Lambert, base colour x that weight x what the specular
  *                layer leaves (1 - its directional albedo).
- * All share alpha = roughness^2; reflection lobes get Multiscatter GGX's
- * energy (microfacet.h); at alpha^2 <= MICROFACET_SINGULAR_ALPHA2 a lobe is
+ * All share alpha = roughness^2; every lobe gets Multiscatter GGX's
+ * energy (microfacet.h; glass by its own albedo tables); at alpha^2 <= MICROFACET_SINGULAR_ALPHA2 a lobe is
  * a perfect mirror or smooth glass (sampled only, never evaluated).
  * Directions are local to the shading normal's frame, wo towards the
  * viewer (wo.z > 0). Sampling picks one lobe by its estimated albedo and
@@ -53,7 +53,7 @@ typedef struct {
     float3 metal_f0, metal_b, metal_ms;
     bool metal_constant;  /* Glossy node: Fresnel = metal_f0 */
     float glass_eta;      /* n_t / n_i on this side */
-    float3 glass_f0, glass_rtint, glass_ttint;
+    float3 glass_f0, glass_rtint, glass_ttint, glass_ms;
     float q[BSDF_LOBES];  /* probability of sampling each lobe */
     int sample;           /* the lobes sampling may choose (BSDF_SAMPLE_*) */
 } Bsdf;
@@ -71,11 +71,12 @@ inline float3 Bsdf_metal_fresnel(const Bsdf *f, float cos_i) {
     return f->metal_constant ? f->metal_f0 : Microfacet_fresnel_f82(f->metal_f0, f->metal_b, cos_i);
 }
 
-/* Glass: reflected and transmitted parts of the Fresnel at cos to h. */
+/* Glass: reflected and transmitted parts of the Fresnel at cos to h, with
+ * the multiple-scattering factor. */
 inline void Bsdf_glass_fresnel(const Bsdf *f, float cos_i, float3 *r, float3 *t) {
     float3 fr = Microfacet_fresnel_remap(f->glass_f0, cos_i, f->glass_eta); /* 1 on total internal reflection */
-    *r = fr * f->glass_rtint;
-    *t = ((float3)(1.0f) - fr) * f->glass_ttint;
+    *r = fr * f->glass_rtint * f->glass_ms;
+    *t = ((float3)(1.0f) - fr) * f->glass_ttint * f->glass_ms;
 }
 
 inline float Bsdf_reflect_probability(float3 r, float3 t) {
@@ -132,6 +133,8 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     f.glass_f0 = fmin((float3)(Microfacet_f0(m->ior)) * (glass_node ? one : tint), one);
     f.glass_rtint = glass_node ? c : one;
     f.glass_ttint = glass_node ? c : sqrt(cc);
+    f.glass_ms = f.w_glass > 0.0f ? Microfacet_glass_multiscatter(f.rough, mu, f.glass_eta, glass_node ? one : f.glass_ttint)
+                                  : one;
     /* the specular layer and what it leaves the diffuse base */
     f.spec_eta = m->specular_tint.w;
     f.spec_f0 = fmin((float3)(Microfacet_f0(f.spec_eta)) * tint, one);

@@ -78,14 +78,24 @@ inline float Microfacet_lerp_index(float x, int n, int *i) {
     return f - (float)*i;
 }
 
+/* A table t[x][y] of n x n points, read bilinearly. */
+inline float Microfacet_lookup2(__constant float *t, int n, float x, float y) {
+    int i, j;
+    float fx = Microfacet_lerp_index(x, n, &i), fy = Microfacet_lerp_index(y, n, &j);
+    __constant float *row0 = t + i * n, *row1 = row0 + n;
+    return mix(mix(row0[j], row0[j + 1], fy), mix(row1[j], row1[j + 1], fy), fx);
+}
+
+/* A table t[x][y][z] of n x n x n points, read trilinearly. */
+inline float Microfacet_lookup3(__constant float *t, int n, float x, float y, float z) {
+    int i;
+    float fx = Microfacet_lerp_index(x, n, &i);
+    return mix(Microfacet_lookup2(t + i * n * n, n, y, z), Microfacet_lookup2(t + (i + 1) * n * n, n, y, z), fx);
+}
+
 /* E(rough, mu): single-scattering albedo with Fresnel 1. */
 inline float Microfacet_E(float rough, float mu) {
-    int i, j;
-    float fr = Microfacet_lerp_index(rough, MICROFACET_E_SIZE, &i);
-    float fm = Microfacet_lerp_index(mu, MICROFACET_E_SIZE, &j);
-    __constant float *row0 = Microfacet_table_E + i * MICROFACET_E_SIZE, *row1 = row0 + MICROFACET_E_SIZE;
-    float a = mix(row0[j], row0[j + 1], fm), b = mix(row1[j], row1[j + 1], fm);
-    return fmax(mix(a, b, fr), 1e-4f);
+    return fmax(Microfacet_lookup2(Microfacet_table_E, MICROFACET_E_SIZE, rough, mu), 1e-4f);
 }
 
 inline float Microfacet_E_avg(float rough) {
@@ -94,29 +104,39 @@ inline float Microfacet_E_avg(float rough) {
     return mix(Microfacet_table_E_avg[i], Microfacet_table_E_avg[i + 1], f);
 }
 
-/* S(rough, mu, eta): the lobe's mean Fresnel remap over E. */
-inline float Microfacet_S(float rough, float mu, float eta) {
-    float z = sqrt(fabs((eta - 1.0f) / (eta + 1.0f)));
-    int i, j, k;
-    float fz = Microfacet_lerp_index(z, MICROFACET_S_SIZE, &i);
-    float fm = Microfacet_lerp_index(mu, MICROFACET_S_SIZE, &j);
-    float fr = Microfacet_lerp_index(rough, MICROFACET_S_SIZE, &k);
-    float v[2];
-    for (int dz = 0; dz < 2; ++dz) {
-        __constant float *p = Microfacet_table_S + ((i + dz) * MICROFACET_S_SIZE + j) * MICROFACET_S_SIZE + k;
-        float a = mix(p[0], p[1], fr), b = mix(p[MICROFACET_S_SIZE], p[MICROFACET_S_SIZE + 1], fr);
-        v[dz] = mix(a, b, fm);
-    }
-    return mix(v[0], v[1], fz);
+/* The tables' coordinate of an index: z = sqrt(|eta - 1| / (eta + 1)). */
+inline float Microfacet_index_z(float eta) {
+    return sqrt(fabs((eta - 1.0f) / (eta + 1.0f)));
 }
 
-/* Multiscatter GGX as Cycles adds it to a reflection lobe: the factor on
- * the single-scattering lobe, 1 + F_ms (1 - E) / E, with F_ms from the
- * lobe's hemispherical mean Fresnel f_ss (Kulla and Conty 2017). */
-inline float3 Microfacet_multiscatter(float rough, float mu, float3 f_ss) {
-    float e = Microfacet_E(rough, mu), e_avg = Microfacet_E_avg(rough);
+/* S(rough, mu, eta): the lobe's mean Fresnel remap over E. */
+inline float Microfacet_S(float rough, float mu, float eta) {
+    return Microfacet_lookup3(Microfacet_table_S, MICROFACET_S_SIZE, Microfacet_index_z(eta), mu, rough);
+}
+
+/* Kulla and Conty's multiple-scattering factor on a lobe of single-
+ * scattering albedo e (hemispherical mean e_avg) and mean Fresnel f_ss:
+ * 1 + F_ms (1 - e) / e, as Cycles' Multiscatter GGX applies it. */
+inline float3 Microfacet_ms_factor(float e, float e_avg, float3 f_ss) {
     float3 f_ms = f_ss * e_avg / ((float3)(1.0f) - f_ss * (1.0f - e_avg));
     return (float3)(1.0f) + f_ms * ((1.0f - e) / e);
+}
+
+/* Multiscatter GGX on a reflection lobe. */
+inline float3 Microfacet_multiscatter(float rough, float mu, float3 f_ss) {
+    return Microfacet_ms_factor(Microfacet_E(rough, mu), Microfacet_E_avg(rough), f_ss);
+}
+
+/* Multiscatter GGX on glass seen from the side where eta = n_t / n_i: the
+ * albedo tables of that side (shading/microfacet_tables.py, G), f_ss the
+ * transmission tint (Cycles takes it as most of the glass's colour). */
+inline float3 Microfacet_glass_multiscatter(float rough, float mu, float eta, float3 f_ss) {
+    int side = eta < 1.0f ? 1 : 0;
+    float z = Microfacet_index_z(side ? 1.0f / eta : eta);
+    const int n = MICROFACET_G_SIZE;
+    float e = fmax(Microfacet_lookup3(Microfacet_table_G + side * n * n * n, n, z, mu, rough), 1e-4f);
+    float e_avg = Microfacet_lookup2(Microfacet_table_G_avg + side * n * n, n, z, rough);
+    return Microfacet_ms_factor(e, e_avg, f_ss);
 }
 
 /* Reflection off the microfacets: f cos_i (Fresnel left out) and the
