@@ -19,8 +19,9 @@ from .gi import cut as gi_cut
 from .gi import pipeline as gi_pipeline
 from .image import film_bytes
 from .image import programs as image_programs
+from .photons import reweight as photon_reweight
 from .photons import trace as photon_trace
-from .photons.emit import Emitter, emitter_powers, maps_needed
+from .photons.emit import Emitter, emitter_powers, maps_needed, reweight_scales
 from .accel import kdtree_build
 from .device.primitives import programs as primitives_programs
 from .scene.model import PARTS, Scene, part_digests
@@ -30,8 +31,10 @@ from .settings import RenderSettings
 
 # settings photon tracing reads: a change traces the maps again
 _PHOTON_KNOBS = ("global_photons", "caustic_photons", "seed", "photon_k", "max_bounces")
-# scene parts the photon maps are made from
+# scene parts the photon maps are made from; the last two only weigh the
+# photons when no light moves (photons/reweight.py)
 _PHOTON_PARTS = ("geometry", "materials", "lights", "world")
+_PHOTON_PATH_KEY = len(_PHOTON_KNOBS) + 2  # the photon key's knobs, geometry and materials
 # settings the GI cache reads beyond the photon maps': a change runs its stages again
 _CACHE_KNOBS = ("gi_subpixels", "cache_seeds", "cache_alpha", "cut_delta", "gather_rays")
 
@@ -47,6 +50,8 @@ class Held:
     generations: dict = field(default_factory=lambda: {part: 0 for part in PARTS})
     tables: SceneTables | None = None
     photon_key: tuple | None = None
+    photon_emitters: list | None = None  # the emitters of the photon maps held, as traced or last reweighted
+    photon_lights: object = None  # and the light table they were traced with
     cache_key: tuple | None = None
     records_keys: tuple = ()  # of the cache records held (views of a lit scene)
 
@@ -64,6 +69,7 @@ class Plan:
     emitters: list[Emitter]
     photon_maps: dict[str, str]  # map -> "built..." or "skipped: why"
     photons_reused: bool  # the maps held are used again
+    photon_scales: object  # (E, 4) float32 when the maps held are reweighted for new light powers, else None
     photon_key: tuple | None  # of the maps this render uses
     cache_reused: bool  # the GI cache held (same view, scene and settings) is used again
     cache_key: tuple | None  # of the GI cache this render uses
@@ -77,8 +83,13 @@ class Plan:
     reuse: dict = field(default_factory=dict)  # what is kept, and why
 
     @property
+    def reweights_photons(self) -> bool:
+        return self.photon_scales is not None
+
+    @property
     def traces_photons(self) -> bool:
-        return not self.photons_reused and any(v.startswith("built") for v in self.photon_maps.values())
+        return (not self.photons_reused and not self.reweights_photons
+                and any(v.startswith("built") for v in self.photon_maps.values()))
 
     def check_budget(self, device) -> None:
         """A clear error before any upload when the render cannot fit the device."""
@@ -126,7 +137,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     image_defines = dict(scene_defines)
     if "light_passes" in stages:
         image_defines["IMAGE_LIGHT_PASSES"] = 1
-    emitters, maps, photon_key, reuse, reused = [], {}, None, {}, False
+    emitters, maps, photon_key, reuse, reused, scales = [], {}, None, {}, False, None
     cache_key, cache_reused, records_key, records_reused = None, False, None, False
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1
@@ -137,6 +148,11 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         reused = photon_key == held.photon_key
         if reused:
             reuse["photons"] = "neither the lit scene nor the photon settings changed"
+        elif (held.photon_key is not None and held.photon_key[:_PHOTON_PATH_KEY] == photon_key[:_PHOTON_PATH_KEY]
+              and held.photon_emitters is not None):
+            scales = reweight_scales(held.photon_emitters, held.photon_lights, emitters, tables.lights)
+            if scales is not None:
+                reuse["photons"] = "only the lights' power or colour changed: the photons are reweighted"
         cache_key = (photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS)
                      + tuple(generations[p] for p in PARTS))
         cache_reused = cache_key == held.cache_key
@@ -147,7 +163,8 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         records_reused = settings.cache_reuse and not cache_reused and records_key in held.records_keys
         if records_reused:
             reuse["cache_records"] = "only the view changed: records in world space are kept"
-        stages += _gi_stages(maps, reused, cache_reused, records_reused)
+        stages += _gi_stages(maps, "_reused" if reused else "_reweighted" if scales is not None else "",
+                             cache_reused, records_reused)
         if "glossy" in stages and maps["global"].startswith("built"):
             # glossy paths read the cut where they land on diffuse surfaces
             stages.append("glossy_cut")
@@ -158,7 +175,8 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         reuse["kdtree"] = "the triangles did not change"
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
-        emitters=emitters, photon_maps=maps, photons_reused=reused, photon_key=photon_key, cache_reused=cache_reused,
+        emitters=emitters, photon_maps=maps, photons_reused=reused, photon_scales=scales, photon_key=photon_key,
+        cache_reused=cache_reused,
         cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
         image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
     the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
@@ -191,13 +209,13 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
     return features
 
 
-def _gi_stages(maps: dict[str, str], photons_reused: bool, cache_reused: bool, records_reused: bool) -> list[str]:
-    """The GI stages: the photon maps traced (or reused), then the cache
+def _gi_stages(maps: dict[str, str], photons: str, cache_reused: bool, records_reused: bool) -> list[str]:
+    """The GI stages: the photon maps traced (``photons`` "") or held
+    ("_reused", "_reweighted"), then the cache
     stages where there is light (cache points and gathering only where the
     records kept leave gaps), and caustics where there is a caustic map
     (each "_reused" when the cache held is used again)."""
-    stages = [f"{name}_photons" + ("_reused" if photons_reused else "") for name in ("global", "caustic")
-              if maps[name].startswith("built")]
+    stages = [f"{name}_photons{photons}" for name in ("global", "caustic") if maps[name].startswith("built")]
     cache = []
     if maps["global"].startswith("built"):
         cache += ["shading_points", *(["cache_records_reused"] if records_reused else []), "sample_points",
@@ -246,6 +264,8 @@ def _programs(device, settings: RenderSettings, the_plan: Plan) -> list[tuple[st
     if settings.mode == "gi":
         if the_plan.traces_photons:
             wanted += photon_trace.programs(the_plan.scene_defines)
+        if the_plan.reweights_photons:
+            wanted += photon_reweight.programs()
         if not the_plan.cache_reused:
             wanted += gi_pipeline.programs(device, settings, the_plan.stages, the_plan.scene_defines)
     return wanted + image_programs(the_plan.image_defines)

@@ -25,6 +25,7 @@ from .device.timer import StageTimer
 from .errors import DeviceError, GpuGiError, check_stop
 from .gi.pipeline import GiField, render_gi
 from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
+from .photons.reweight import reweight_maps
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
 from .plan import Held, Plan, plan
 from .scene.model import Scene
@@ -137,16 +138,23 @@ class Renderer:
         self._unsynced = set()
 
     def _photon_maps(self, the_plan: Plan, settings: RenderSettings) -> PhotonMaps:
-        """The plan's photon maps: traced, or the ones held when it says they are reused."""
+        """The plan's photon maps: traced, or the ones held when it says they
+        are reused, or those reweighted for the lights' new power."""
         if the_plan.photons_reused and self._maps is not None:
             return self._maps
-        self._held.photon_key, self._maps = None, None
-        photon_settings = PhotonSettings(settings.global_photons, settings.caustic_photons, settings.seed,
-                                         settings.photon_k, settings.max_bounces)
-        self._maps = trace_maps(self.device, self._buffers, the_plan.emitters, the_plan.photon_maps, photon_settings,
-                                the_plan.scene_defines)
-        self._held.photon_key = the_plan.photon_key
-        return self._maps
+        held, maps = self._held, self._maps
+        held.photon_key, self._maps = None, None
+        if the_plan.reweights_photons and maps is not None:
+            reweight_maps(self.device, maps, the_plan.photon_scales, held.photon_emitters, the_plan.emitters)
+        else:
+            photon_settings = PhotonSettings(settings.global_photons, settings.caustic_photons, settings.seed,
+                                             settings.photon_k, settings.max_bounces)
+            maps = trace_maps(self.device, self._buffers, the_plan.emitters, the_plan.photon_maps, photon_settings,
+                              the_plan.scene_defines)
+        self._maps = maps
+        held.photon_key, held.photon_emitters = the_plan.photon_key, the_plan.emitters
+        held.photon_lights = the_plan.tables.lights.copy()
+        return maps
 
     def _gi_cache(self, scene: Scene, settings: RenderSettings, the_plan: Plan, maps: PhotonMaps,
                   timer: StageTimer, should_stop, say) -> GiField:
@@ -198,6 +206,7 @@ class Renderer:
         }
         if field_ is not None:
             stats["gi"] = {**field_.stats, "photons_reused": not the_plan.traces_photons,
+                           "photons_reweighted": the_plan.reweights_photons,
                            "cache_reused": the_plan.cache_reused}
         return stats
 

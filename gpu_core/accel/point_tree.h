@@ -36,6 +36,16 @@ typedef struct {
     const __global float4 *normal;
 } PhotonData;
 
+/* A node's approximate irradiance E~_p = max(0, n_p . sum_i w_i Phi_i[c]) /
+ * r_p^2 per channel c, from the moments m_c = sum_i w_i Phi_i[c] of its
+ * photons (w_i incident directions), its representative normal n_p and
+ * size r_p; 0 where it is not finite. */
+inline float3 PointNode_irradiance(float3 n_p, float r_p, float3 m0, float3 m1, float3 m2) {
+    if (!(r_p > 0.0f)) return (float3)(0.0f);
+    float3 e = (float3)(fmax(0.0f, dot(n_p, m0)), fmax(0.0f, dot(n_p, m1)), fmax(0.0f, dot(n_p, m2))) * (1.0f / (r_p * r_p));
+    return isfinite(e.x) && isfinite(e.y) && isfinite(e.z) ? e : (float3)(0.0f);
+}
+
 #define PHOTON_DATA_OF(p) ((PhotonData){p##_power, p##_dir, p##_normal})
 #define PHOTON_DATA_MAKE() PHOTON_DATA_OF(ph)
 

@@ -502,13 +502,7 @@ __kernel void PointBuild_emit(const __global BuildNode *nodes, const __global Bu
     float r_p = fmax(fmax(fmax(ext.x, ext.y), ext.z), radius);
     float len = length(s.normal.xyz);
     float3 n_p = len > 0.0f ? s.normal.xyz / len : (float3)(0.0f);
-    float3 e = (float3)(0.0f);
-    if (r_p > 0.0f) {
-        float inv = 1.0f / (r_p * r_p);
-        e = (float3)(fmax(0.0f, dot(n_p, s.moment[0].xyz)), fmax(0.0f, dot(n_p, s.moment[1].xyz)),
-                     fmax(0.0f, dot(n_p, s.moment[2].xyz))) * inv;
-        if (!(isfinite(e.x) && isfinite(e.y) && isfinite(e.z))) e = (float3)(0.0f);
-    }
+    float3 e = PointNode_irradiance(n_p, r_p, s.moment[0].xyz, s.moment[1].xyz, s.moment[2].xyz);
     info.lo = nd.count > 0 ? (float4)(s.lo.xyz, r_p) : (float4)(0.0f, 0.0f, 0.0f, r_p);
     info.hi = nd.count > 0 ? (float4)(s.hi.xyz, 0.0f) : (float4)(0.0f);
     info.power = (float4)(s.power.xyz, 0.0f);

@@ -63,6 +63,35 @@ def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:
     return table
 
 
+# light-table fields a photon's path depends on: where a light is and how it
+# shines, not how bright it is (power, radiance and the shadow-ray pick)
+_PATH_FIELDS = ("position", "direction", "axis_u", "axis_v", "radius", "cos_half", "spot_smooth", "sun_norm", "kind",
+                "shape")
+
+
+def reweight_scales(traced: list[Emitter], traced_lights: np.ndarray, emitters: list[Emitter],
+                    lights: np.ndarray) -> np.ndarray | None:
+    """Per emitter of maps traced for ``traced`` (with light table
+    ``traced_lights``), the rgb factor that gives them the power of
+    ``emitters`` (light table ``lights``) — or None when the photons' paths
+    would differ: another set of emitters, a light moved, turned or
+    reshaped, a light row added or removed, or a channel lit that was dark."""
+    if len(traced) != len(emitters) or len(traced_lights) != len(lights):
+        return None
+    for name in _PATH_FIELDS:
+        if not np.array_equal(traced_lights[name], lights[name]):
+            return None
+    scales = np.ones((len(emitters), 4), np.float32)
+    for i, (old, new) in enumerate(zip(traced, emitters)):
+        if old.row != new.row:
+            return None
+        before, after = np.asarray(old.carried, np.float64), np.asarray(new.carried, np.float64)
+        if ((before <= 0) & (after > 0)).any():
+            return None
+        scales[i, :3] = np.where(before > 0, after / np.where(before > 0, before, 1.0), 0.0)
+    return scales
+
+
 MAPS = ("global", "caustic")
 
 

@@ -17,7 +17,9 @@
  * capacity are counted but not written, so the host can retry larger. Each
  * also gets a key, photon index x stride + its stores so far, by which the
  * host puts them in an order that does not depend on the scheduling
- * (Photon_reorder): the same scene gives the same photon maps. */
+ * (Photon_reorder): the same scene gives the same photon maps. A photon's
+ * power carries the index of its emitter in w, so that a change of light
+ * power alone reweights the maps instead (photon_reweight.cl). */
 #include "shading/surface.h"
 #include "photons/photon_emit.h"
 
@@ -44,8 +46,9 @@ inline int Photon_emitter(const __global PhotonEmitter *emitters, int n_emitters
 }
 
 /* Store a photon: position, incident direction pointing back along the
- * path, power, normal, and its key. */
-inline void Photon_store(float3 p, float3 incident, float3 power, float3 n, uint key, volatile __global int *counter,
+ * path, power with its emitter's index, normal, and its key. */
+inline void Photon_store(float3 p, float3 incident, float3 power, int emitter, float3 n, uint key,
+                         volatile __global int *counter,
                          int capacity, __global float4 *out_pos, __global float4 *out_dir,
                          __global float4 *out_power, __global float4 *out_normal, __global uint *out_key) {
     int slot = atomic_inc(counter);
@@ -53,7 +56,7 @@ inline void Photon_store(float3 p, float3 incident, float3 power, float3 n, uint
     out_key[slot] = key;
     out_pos[slot] = (float4)(p, 0.0f);
     out_dir[slot] = (float4)(incident, 0.0f);
-    out_power[slot] = (float4)(power, 0.0f);
+    out_power[slot] = (float4)(power, (float)emitter);
     out_normal[slot] = (float4)(n, 0.0f);
 }
 
@@ -69,7 +72,8 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
     if (i >= n_photons) return;
     SceneView sc = SCENE_MAKE();
     Rng rng = Rng_make((uint)i, pass == PHOTON_PASS_CAUSTIC ? 1u : 0u, seed); /* one stream per map */
-    PhotonEmitter e = emitters[Photon_emitter(emitters, n_emitters, i)];
+    int emitter = Photon_emitter(emitters, n_emitters, i);
+    PhotonEmitter e = emitters[emitter];
     PhotonRay ray = PhotonEmit_photon(&e, sc.lights, &sc.em, sphere, i - e.first, &rng);
     float3 org = ray.org, dir = ray.dir, power = ray.power;
     path_out[i] = (float4)(power, 0.0f);
@@ -95,8 +99,8 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
         Bsdf f = Surface_bsdf(&sp, &m, base, dir, BSDF_SAMPLE_ALL);
         bool diffuse = f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f;
         if (diffuse && (pass == PHOTON_PASS_ALL || (pass == PHOTON_PASS_GLOBAL) != caustic)) {
-            Photon_store(sp.p, -dir, power, sp.ns, (uint)i * key_stride + stores++, counter, capacity, out_pos,
-                         out_dir, out_power, out_normal, out_key);
+            Photon_store(sp.p, -dir, power, emitter, sp.ns, (uint)i * key_stride + stores++, counter, capacity,
+                         out_pos, out_dir, out_power, out_normal, out_key);
             if (pass == PHOTON_PASS_CAUSTIC) break;
         }
         if (bounces >= max_bounces) break;

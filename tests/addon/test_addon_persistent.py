@@ -41,13 +41,13 @@ def test_a_camera_move_reuses_the_kdtree_and_photons_only_with_persistent_data(b
     assert not np.allclose(first, second)  # the new view, not the old image
 
 
-def test_a_light_edit_traces_the_photons_again_and_keeps_the_kdtree(bpy_module, tmp_path):
+def test_a_light_power_edit_reweights_the_photons_and_keeps_the_kdtree(bpy_module, tmp_path):
     scene = _box_torus(bpy_module, True)
     first, _ = _frame(bpy_module, scene, tmp_path / "1.exr")
     light = next(obj for obj in scene.objects if obj.type == "LIGHT")
     light.data.energy *= 2.0
     second, plan = _frame(bpy_module, scene, tmp_path / "2.exr")
-    assert "kdtree_reused" in plan and "global_photons" in plan
+    assert "kdtree_reused" in plan and "global_photons_reweighted" in plan
     # one light, all light scales with it (the same random streams)
     np.testing.assert_allclose(second[..., :3].mean(), 2.0 * first[..., :3].mean(), rtol=1e-3)
 

@@ -152,7 +152,7 @@ def test_a_material_edit_keeps_the_images_pixels(room):
 
 
 @pytest.mark.parametrize("edit, kdtree, photons", [
-    (_light_power, "kdtree_reused", "global_photons"),
+    (_light_power, "kdtree_reused", "global_photons_reweighted"),
     (_material_colour, "kdtree_reused", "global_photons"),
     (_move_cube, "kdtree", "global_photons"),
     (lambda bpy: None, "kdtree_reused", "global_photons_reused"),
@@ -166,7 +166,14 @@ def test_the_renderer_reuses_what_an_edit_left_and_renders_the_fresh_image(room,
     result = renderer.render(scene, GI, edits=changed)
     assert kdtree in result.stats["plan"] and photons in result.stats["plan"]
     fresh = Renderer(device).render(export_scene(bpy.context.evaluated_depsgraph_get()), GI)
-    np.testing.assert_array_equal(result.passes["Combined"], fresh.passes["Combined"])
+    if photons.endswith("_reweighted"):
+        # the light and the world share the photons as they did before the
+        # edit, each reweighted: the fresh render's image within its noise
+        ours, theirs = result.passes["Combined"][..., :3], fresh.passes["Combined"][..., :3]
+        np.testing.assert_allclose(ours.mean(), theirs.mean(), rtol=5e-3)
+        np.testing.assert_allclose(ours, theirs, rtol=0.1)
+    else:
+        np.testing.assert_array_equal(result.passes["Combined"], fresh.passes["Combined"])
 
 
 def test_only_the_camera_moved_traces_no_photons_and_builds_no_kdtree(room, device):

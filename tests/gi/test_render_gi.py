@@ -104,7 +104,7 @@ def test_photons_and_kdtree_are_not_rebuilt_when_only_the_camera_moves(device):
     assert "global_photons_reused" in moved.stats["plan"] and moved.stats["gi"]["photons_reused"]
     assert "kdtree_reused" in moved.stats["plan"]
     brighter = renderer.render(box_scene(power=200.0), GI)
-    assert "global_photons" in brighter.stats["plan"]  # a light edit traces again
+    assert "global_photons_reweighted" in brighter.stats["plan"]  # a light power edit reweights the photons
     assert "kdtree_reused" in brighter.stats["plan"]  # the same triangles keep their tree
 
 

@@ -41,7 +41,7 @@ def held_after(scene, settings):
     """What a renderer holds after rendering ``scene``, as the plan sees it."""
     first = plan(validate(scene), settings)
     return Held(digests=first.digests, generations=first.generations, tables=first.tables,
-                photon_key=first.photon_key)
+                photon_key=first.photon_key, photon_emitters=first.emitters, photon_lights=first.tables.lights)
 
 
 def moved_camera(scene):
@@ -53,7 +53,7 @@ def moved_camera(scene):
 @pytest.mark.parametrize("edit, uploads, kdtree, photons", [
     (moved_camera, {"camera"}, "kdtree_reused", "global_photons_reused"),
     (lambda s: room(albedo=0.7), {"materials"}, "kdtree_reused", "global_photons"),
-    (lambda s: room(power=200.0), {"lights"}, "kdtree_reused", "global_photons"),
+    (lambda s: room(power=200.0), {"lights"}, "kdtree_reused", "global_photons_reweighted"),
     (lambda s: room(shift=0.1), None, "kdtree", "global_photons"),
 ], ids=["camera", "material_colour", "light_power", "geometry"])
 def test_each_edit_uploads_rebuilds_and_traces_only_what_it_touches(edit, uploads, kdtree, photons):
@@ -63,6 +63,7 @@ def test_each_edit_uploads_rebuilds_and_traces_only_what_it_touches(edit, upload
     if uploads is not None:
         assert edited.changed == uploads
     assert edited.traces_photons == (photons == "global_photons")
+    assert edited.reweights_photons == (photons == "global_photons_reweighted")
 
 
 def test_settings_photon_tracing_does_not_read_keep_the_photon_maps():
@@ -78,7 +79,7 @@ def test_edits_named_by_the_caller_skip_the_hashing():
     named = plan(validate(room(power=200.0)), GI, held, edits={"lights"})
     assert named.changed == {"lights"} and named.digests["lights"] is None
     assert named.digests["geometry"] == held.digests["geometry"]
-    assert "kdtree_reused" in named.stages and named.traces_photons
+    assert "kdtree_reused" in named.stages and named.reweights_photons
 
 
 def test_with_edits_named_the_camera_is_still_compared():
