@@ -29,7 +29,7 @@ from .scene.tables import SceneTables, scene_tables
 from .scene.tables import scene_defines as scene_program_defines
 from .settings import RenderSettings
 
-# settings photon tracing reads: a change traces the maps again
+# settings photon tracing reads, the counts first: a change traces the maps again
 _PHOTON_KNOBS = ("global_photons", "caustic_photons", "seed", "photon_k", "max_bounces")
 # scene parts the photon maps are made from; the last two only weigh the
 # photons when no light moves (photons/reweight.py)
@@ -68,6 +68,7 @@ class Plan:
     tables: SceneTables
     emitters: list[Emitter]
     photon_maps: dict[str, str]  # map -> "built..." or "skipped: why"
+    photon_counts: tuple  # (global, caustic) photons emitted for the maps this render uses
     photons_reused: bool  # the maps held are used again
     photon_scales: object  # (E, 4) float32 when the maps held are reweighted for new light powers, else None
     photon_key: tuple | None  # of the maps this render uses
@@ -137,22 +138,21 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     image_defines = dict(scene_defines)
     if "light_passes" in stages:
         image_defines["IMAGE_LIGHT_PASSES"] = 1
-    emitters, maps, photon_key, reuse, reused, scales = [], {}, None, {}, False, None
+    emitters, maps, photon_key, reuse, reused, scales, counts = [], {}, None, {}, False, None, (0, 0)
     cache_key, cache_reused, records_key, records_reused = None, False, None, False
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1
         emitters = emitter_powers(scene, tables)
-        maps = maps_needed(emitters, scene.triangle_count, scene.has_specular(), settings.global_photons,
-                           settings.caustic_photons)
-        photon_key = tuple(getattr(settings, k) for k in _PHOTON_KNOBS) + tuple(generations[p] for p in _PHOTON_PARTS)
-        reused = photon_key == held.photon_key
-        if reused:
-            reuse["photons"] = "neither the lit scene nor the photon settings changed"
-        elif (held.photon_key is not None and held.photon_key[:_PHOTON_PATH_KEY] == photon_key[:_PHOTON_PATH_KEY]
-              and held.photon_emitters is not None):
-            scales = reweight_scales(held.photon_emitters, held.photon_lights, emitters, tables.lights)
-            if scales is not None:
-                reuse["photons"] = "only the lights' power or colour changed: the photons are reweighted"
+        counts = (settings.global_photons, settings.caustic_photons)
+        maps, photon_key, reused, scales, why = _photon_choice(scene, settings, tables, generations, held, emitters,
+                                                               counts)
+        if not reused and scales is None and settings.photon_share < 1.0:
+            # the maps are traced anyway: a share of them (a quick image)
+            counts = tuple(max(1, round(c * settings.photon_share)) if c > 0 else 0 for c in counts)
+            maps, photon_key, reused, scales, why = _photon_choice(scene, settings, tables, generations, held,
+                                                                   emitters, counts)
+        if why:
+            reuse["photons"] = why
         cache_key = (photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS)
                      + tuple(generations[p] for p in PARTS))
         cache_reused = cache_key == held.cache_key
@@ -175,7 +175,8 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         reuse["kdtree"] = "the triangles did not change"
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
-        emitters=emitters, photon_maps=maps, photons_reused=reused, photon_scales=scales, photon_key=photon_key,
+        emitters=emitters, photon_maps=maps, photon_counts=counts, photons_reused=reused, photon_scales=scales,
+        photon_key=photon_key,
         cache_reused=cache_reused,
         cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
         image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
@@ -183,6 +184,23 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if device is not None and hasattr(device, "device"):
         the_plan.programs = _programs(device, settings, the_plan)
     return the_plan
+
+
+def _photon_choice(scene: Scene, settings: RenderSettings, tables: SceneTables, generations: dict, held: Held,
+                   emitters: list[Emitter], counts: tuple) -> tuple:
+    """The photon maps of ``counts`` (global, caustic) photons: which are
+    built, their key, whether the maps held are those (reused) or can be
+    reweighted to them (the factors), and why."""
+    maps = maps_needed(emitters, scene.triangle_count, scene.has_specular(), *counts)
+    key = counts + tuple(getattr(settings, k) for k in _PHOTON_KNOBS[2:]) + tuple(generations[p] for p in _PHOTON_PARTS)
+    if key == held.photon_key:
+        return maps, key, True, None, "neither the lit scene nor the photon settings changed"
+    if (held.photon_key is not None and held.photon_key[:_PHOTON_PATH_KEY] == key[:_PHOTON_PATH_KEY]
+            and held.photon_emitters is not None):
+        scales = reweight_scales(held.photon_emitters, held.photon_lights, emitters, tables.lights)
+        if scales is not None:
+            return maps, key, False, scales, "only the lights' power or colour changed: the photons are reweighted"
+    return maps, key, False, None, ""
 
 
 def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> list[str]:

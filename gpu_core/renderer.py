@@ -147,8 +147,8 @@ class Renderer:
         if the_plan.reweights_photons and maps is not None:
             reweight_maps(self.device, maps, the_plan.photon_scales, held.photon_emitters, the_plan.emitters)
         else:
-            photon_settings = PhotonSettings(settings.global_photons, settings.caustic_photons, settings.seed,
-                                             settings.photon_k, settings.max_bounces)
+            photon_settings = PhotonSettings(*the_plan.photon_counts, settings.seed, settings.photon_k,
+                                             settings.max_bounces)
             maps = trace_maps(self.device, self._buffers, the_plan.emitters, the_plan.photon_maps, photon_settings,
                               the_plan.scene_defines)
         self._maps = maps
@@ -207,6 +207,7 @@ class Renderer:
         if field_ is not None:
             stats["gi"] = {**field_.stats, "photons_reused": not the_plan.traces_photons,
                            "photons_reweighted": the_plan.reweights_photons,
+                           "photon_counts": list(the_plan.photon_counts),
                            "cache_reused": the_plan.cache_reused}
         return stats
 

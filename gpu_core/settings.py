@@ -103,6 +103,10 @@ class RenderSettings:
     batch_pixels: int = internal(16384)  # most pixels per kernel launch (bounds cancel latency)
     light_passes: bool = internal(False)  # also return the light passes (image.LIGHT_PASSES)
     denoising_passes: bool = internal(False)  # also return Denoising Albedo, Normal and Depth
+    # the share of the photon counts a render traces when it cannot use the
+    # maps held (the viewport's coarse image after an edit): held maps of
+    # the full counts are still used or reweighted
+    photon_share: float = internal(1.0)
 
     def validated(self) -> "RenderSettings":
         """A copy with every field in its valid range."""
@@ -123,6 +127,8 @@ class RenderSettings:
         values["seed"] = int(self.seed) & 0xFFFFFFFF
         values["light_samples"] = max(1, int(self.light_samples))
         values["batch_pixels"] = max(1, int(self.batch_pixels))
+        share = float(self.photon_share)
+        values["photon_share"] = min(max(share, 1e-3), 1.0) if share == share else 1.0
         return replace(self, **values)
 
 

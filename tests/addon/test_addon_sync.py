@@ -251,3 +251,41 @@ def test_a_material_edit_that_drops_an_unknown_node_drops_its_warning(room):
     assert changed == {"materials"} and sync.stats.materials_exported == 1
     assert not any("ShaderNodeBsdfToon" in w for w in scene.warnings)
     _assert_same_scene(scene, export_scene(bpy.context.evaluated_depsgraph_get()))
+
+
+def test_an_edit_s_coarse_image_traces_a_quarter_of_the_photons_and_a_new_view_none(room, device):
+    bpy, edits, *_ = room
+    sync, renderer, stats = SceneSync(), Renderer(device), []
+
+    class Recording:
+        def render(self, *args, **kwargs):
+            result = renderer.render(*args, **kwargs)
+            stats.append(result.stats)
+            return result
+
+    session = ViewportSession(lambda: None, make_renderer=lambda spec: Recording())
+    camera = _camera(bpy)
+
+    def run(updates, view=1, cam=camera):
+        scene, changed = sync.export(bpy.context.evaluated_depsgraph_get(), cam, updates)
+        stats.clear()
+        session.update_scene(Job(scene, GI, None, edits=changed), ("view", view))
+        deadline = time.time() + 60
+        while session.busy and time.time() < deadline:
+            time.sleep(0.01)
+        return [s["gi"] for s in stats]
+
+    full = [GI.global_photons, GI.caustic_photons]
+    coarse, first = run(None)
+    assert coarse["photon_counts"] == [n // 4 for n in full] and first["photon_counts"] == full
+    coarse, first = run(edits.apply(lambda: _material_colour(bpy)))
+    assert coarse["photon_counts"] == [n // 4 for n in full] and not coarse["photons_reused"]
+    assert first["photon_counts"] == full and not first["photons_reused"]
+    # the maps of all the photons serve a new view's coarse image, and a light edit's (reweighted)
+    turned = dataclasses.replace(camera, matrix=camera.matrix.copy())
+    turned.matrix[0, 3] += 0.2
+    coarse, first = run(set(), view=2, cam=turned)
+    assert coarse["photon_counts"] == full and coarse["photons_reused"] and first["photons_reused"]
+    coarse, first = run(edits.apply(lambda: _light_power(bpy)), view=2, cam=turned)
+    assert coarse["photon_counts"] == full and coarse["photons_reweighted"] and first["photons_reused"]
+    session.stop()

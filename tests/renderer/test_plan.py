@@ -145,3 +145,20 @@ def test_cache_records_are_kept_for_a_new_view_of_the_same_lit_scene_only():
     assert not plan(validate(room(power=50.0)), GI, held).records_reused
     assert not plan(validate(moved_camera(room())), dataclasses.replace(GI, cache_reuse=False), held).records_reused
     assert not plan(validate(room()), GI, held).records_reused  # the same view reuses the whole cache instead
+
+
+def test_a_photon_share_traces_fewer_photons_only_where_the_maps_held_cannot_serve():
+    held = held_after(room(), GI)
+    quick = dataclasses.replace(GI, photon_share=0.25)
+    material = plan(validate(room(albedo=0.7)), quick, held)
+    assert material.traces_photons and material.photon_counts == (5_000, 5_000)
+    camera = plan(validate(moved_camera(room())), quick, held)
+    assert camera.photons_reused and camera.photon_counts == (20_000, 20_000)
+    light = plan(validate(room(power=200.0)), quick, held)
+    assert light.reweights_photons and light.photon_counts == (20_000, 20_000)
+    # maps of the share held: a later quick render of the same lit scene uses them
+    shared = dataclasses.replace(held, photon_key=material.photon_key, generations=material.generations,
+                                 digests=material.digests, tables=material.tables)
+    again = plan(validate(room(albedo=0.7)), quick, shared)
+    assert again.photons_reused and again.photon_counts == (5_000, 5_000)
+    assert plan(validate(room(albedo=0.7)), GI, shared).traces_photons
