@@ -40,8 +40,12 @@
 #define BSDF_SAMPLE_ALL 3
 
 typedef struct {
-    float3 t, b, n;       /* shading frame, n facing the viewer */
+    float3 t, b, n;       /* shading frame (the diffuse lobe's), n on the viewer's side of the surface */
     float3 wo, ng;        /* local: towards the viewer, geometric normal on its side */
+    float3 gt, gb, gn;    /* the glossy lobes' frame: n raised towards ng where the view's mirror
+                             direction would go below the surface (Cycles' valid specular reflection) */
+    float3 gwo;           /* the view in the glossy frame */
+    bool split;           /* the glossy frame is not the shading frame */
     float3 smooth;        /* local: the normal before a normal map, on the viewer's side */
     bool mapped;          /* a normal map moved the shading normal off the smooth one */
     float rough, alpha2;
@@ -65,6 +69,39 @@ inline float3 Bsdf_reflect(float3 d, float3 n) { return d - 2.0f * dot(d, n) * n
 inline float3 Bsdf_to_local(const Bsdf *f, float3 v) { return (float3)(dot(v, f->t), dot(v, f->b), dot(v, f->n)); }
 
 inline float3 Bsdf_to_world(const Bsdf *f, float3 v) { return v.x * f->t + v.y * f->b + v.z * f->n; }
+
+/* A local direction in the glossy frame, and back. */
+inline float3 Bsdf_to_glossy(const Bsdf *f, float3 v) {
+    if (!f->split) return v;
+    float3 w = Bsdf_to_world(f, v);
+    return (float3)(dot(w, f->gt), dot(w, f->gb), dot(w, f->gn));
+}
+
+inline float3 Bsdf_from_glossy(const Bsdf *f, float3 g) {
+    return f->split ? Bsdf_to_local(f, g.x * f->gt + g.y * f->gb + g.z * f->gn) : g;
+}
+
+/* The normal of the glossy lobes for the view wo (world, all on the view's
+ * side): n itself where the mirror direction of wo leaves the surface by
+ * at least min(0.9 cos, 0.01) of ng, else n turned towards ng in their
+ * plane just enough for that, as Cycles' ensure_valid_specular_reflection
+ * (a shading normal tilted away from the viewer, at silhouettes and under
+ * normal maps, would reflect the view into the surface). */
+inline float3 Bsdf_glossy_normal(float3 ng, float3 wo, float3 n) {
+    float iz = dot(wo, ng);
+    float threshold = fmin(0.9f * iz, 0.01f);
+    if (dot(ng, 2.0f * dot(n, wo) * n - wo) >= threshold) return n;
+    float3 x = n - dot(n, ng) * ng;
+    float xl = length(x);
+    x = xl > 1e-7f ? x / xl : n;
+    float ix = dot(wo, x);
+    float a = ix * ix + iz * iz;
+    if (!(a > 0.0f)) return ng;
+    float b = 2.0f * (a + iz * threshold), c = (threshold + iz) * (threshold + iz);
+    float root = sqrt(fmax(b * b - 4.0f * a * c, 0.0f));
+    float nz2 = clamp(0.25f * (ix < 0.0f ? b + root : b - root) / a, 0.0f, 1.0f);
+    return normalize(sqrt(1.0f - nz2) * x + sqrt(nz2) * ng);
+}
 
 /* Metal Fresnel at cos to the microfacet normal. */
 inline float3 Bsdf_metal_fresnel(const Bsdf *f, float cos_i) {
@@ -94,14 +131,23 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
                       bool entering, int sample) {
     Bsdf f;
     f.sample = sample;
-    f.n = dot(ns, wo_world) > 1e-6f ? ns : ng;
+    /* the diffuse lobe keeps the shading normal even where it faces away
+     * from the viewer (as Cycles does); the glossy lobes get theirs */
+    f.n = ns;
     Sampling_frame(f.n, &f.t, &f.b);
     f.wo = Bsdf_to_local(&f, wo_world);
     f.wo.z = fmax(f.wo.z, 1e-6f);
+    f.gn = Bsdf_glossy_normal(ng, wo_world, ns);
+    f.split = dot(f.gn, ns) < 1.0f - 1e-6f;
+    f.gwo = f.wo;
+    if (f.split) {
+        Sampling_frame(f.gn, &f.gt, &f.gb);
+        f.gwo = (float3)(dot(wo_world, f.gt), dot(wo_world, f.gb), fmax(dot(wo_world, f.gn), 1e-6f));
+    }
     f.ng = Bsdf_to_local(&f, ng);
     f.smooth = Bsdf_to_local(&f, smooth);
     f.mapped = dot(ns, smooth) < 1.0f - 1e-6f;
-    float mu = f.wo.z;
+    float mu = f.gwo.z; /* the glossy lobes' view angle */
     f.rough = clamp(m->roughness, 0.0f, 1.0f);
     float alpha = f.rough * f.rough;
     f.alpha2 = alpha * alpha;
@@ -176,15 +222,16 @@ inline bool Bsdf_has_smooth(const Bsdf *f) {
 }
 
 /* Cycles' bump shadowing term for the light from local direction wi on a
- * normal-mapped surface: nothing where wi and the mapped normal lie on
- * different sides of the smooth surface (light would leak round to the
- * back), and for the diffuse lobe the GGX shadowing of a roughness set by
+ * lobe of normal n (local) off the smooth surface (a normal map, or the
+ * glossy frame raised): nothing where wi and n lie on different sides of
+ * the smooth surface (light would leak round to the back), and for the
+ * diffuse lobe under a normal map the GGX shadowing of a roughness set by
  * how far the map tilts the normal (Conty Estevez et al. 2019: "Bump Map
  * Correction", on by default), which softens the terminator. */
-inline float Bsdf_bump_shadowing(const Bsdf *f, float3 wi, bool diffuse) {
-    if (!f->mapped) return 1.0f;
-    float cos_si = dot(f->smooth, wi), cos_sn = f->smooth.z;
-    if (cos_si * cos_sn * wi.z < 0.0f) return 0.0f;
+inline float Bsdf_bump_shadowing(const Bsdf *f, float3 wi, float3 n, bool diffuse) {
+    if (!(diffuse ? f->mapped : f->mapped || f->split)) return 1.0f;
+    float cos_si = dot(f->smooth, wi), cos_sn = dot(f->smooth, n);
+    if (cos_si * cos_sn * dot(n, wi) < 0.0f) return 0.0f;
     if (!diffuse) return 1.0f;
     float cos_i = fabs(cos_si), cos_d = fabs(cos_sn);
     if (cos_d >= 1.0f || cos_i >= 1.0f) return 1.0f;
@@ -195,21 +242,24 @@ inline float Bsdf_bump_shadowing(const Bsdf *f, float3 wi, bool diffuse) {
 
 /* f cos for the local direction wi over the evaluable lobes, split into
  * the diffuse part (*diffuse) and the glossy part (returned; transmission
- * included), and the pdf of sampling wi (Bsdf_sample). */
+ * included), and the pdf of sampling wi (Bsdf_sample). A lobe reflects
+ * where wi is above both its normal and ng, and transmits where below both. */
 inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
-    float3 none = (float3)(0.0f), glossy = none;
+    float3 none = (float3)(0.0f), glossy = none, up = (float3)(0.0f, 0.0f, 1.0f);
     *diffuse = none;
     *pdf = 0.0f;
-    bool below = wi.z < 0.0f;
-    if (below != (dot(wi, f->ng) < 0.0f) || wi.z == 0.0f) return none; /* the normals disagree on the side */
-    float3 wo = f->wo;
-    if (!below) {
-        *diffuse = f->diffuse * (wi.z / PI_F) * Bsdf_bump_shadowing(f, wi, true);
+    bool below = dot(wi, f->ng) < 0.0f;
+    if (!below && wi.z > 0.0f) {
+        *diffuse = f->diffuse * (wi.z / PI_F) * Bsdf_bump_shadowing(f, wi, up, true);
         *pdf += f->q[BSDF_DIFFUSE] * wi.z / PI_F;
-        if (f->singular) return none;
+    }
+    if (f->singular) return none;
+    float3 wo = f->gwo, gwi = Bsdf_to_glossy(f, wi), gn = Bsdf_from_glossy(f, up);
+    if (below != (gwi.z < 0.0f) || gwi.z == 0.0f) return none;
+    if (!below) {
         float lobe_pdf;
-        float v = Microfacet_reflect_eval(f->alpha2, wo, wi, &lobe_pdf);
-        float cos_h = dot(wo, normalize(wo + wi));
+        float v = Microfacet_reflect_eval(f->alpha2, wo, gwi, &lobe_pdf);
+        float cos_h = dot(wo, normalize(wo + gwi));
         if (f->w_specular > 0.0f) {
             glossy += f->w_specular * v * f->spec_ms * Microfacet_fresnel_remap(f->spec_f0, cos_h, f->spec_eta);
             *pdf += f->q[BSDF_SPECULAR] * lobe_pdf;
@@ -224,16 +274,16 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
             glossy += f->w_glass * v * r;
             *pdf += f->q[BSDF_GLASS] * lobe_pdf * Bsdf_reflect_probability(r, t);
         }
-        return glossy * Bsdf_bump_shadowing(f, wi, false);
+        return glossy * Bsdf_bump_shadowing(f, wi, gn, false);
     }
-    if (f->singular || !(f->w_glass > 0.0f) || fabs(f->glass_eta - 1.0f) < 1e-4f) return none;
+    if (!(f->w_glass > 0.0f) || fabs(f->glass_eta - 1.0f) < 1e-4f) return none;
     float v, lobe_pdf;
     float3 h;
-    if (!Microfacet_refract_eval(f->alpha2, f->glass_eta, wo, wi, &v, &lobe_pdf, &h)) return none;
+    if (!Microfacet_refract_eval(f->alpha2, f->glass_eta, wo, gwi, &v, &lobe_pdf, &h)) return none;
     float3 r, t;
     Bsdf_glass_fresnel(f, dot(wo, h), &r, &t);
-    *pdf = f->q[BSDF_GLASS] * lobe_pdf * (1.0f - Bsdf_reflect_probability(r, t));
-    return f->w_glass * v * t * Bsdf_bump_shadowing(f, wi, false);
+    *pdf += f->q[BSDF_GLASS] * lobe_pdf * (1.0f - Bsdf_reflect_probability(r, t));
+    return f->w_glass * v * t * Bsdf_bump_shadowing(f, wi, gn, false);
 }
 
 /* Sample a direction: *wi (local), *weight = f cos / pdf over the lobes
@@ -246,7 +296,7 @@ inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3
     float acc = f->q[0];
     while (lobe < BSDF_LOBES - 1 && u_lobe >= acc) acc += f->q[++lobe];
     if (u_lobe >= acc || !(f->q[lobe] > 0.0f)) return 0;
-    float3 wo = f->wo, one = (float3)(1.0f);
+    float3 wo = f->gwo, one = (float3)(1.0f);
     int label;
     if (lobe == BSDF_DIFFUSE) {
         float2 d = Sampling_disk(u1, u2);
@@ -262,18 +312,20 @@ inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3
             Bsdf_glass_fresnel(f, cos_h, &r, &t);
             refract = u3 >= Bsdf_reflect_probability(r, t);
         }
+        float3 gwi; /* in the glossy frame */
         if (refract) {
-            if (!Microfacet_refract(wo, h, f->glass_eta, wi)) return 0;
+            if (!Microfacet_refract(wo, h, f->glass_eta, &gwi)) return 0;
         } else {
-            *wi = Bsdf_reflect(-wo, h);
+            gwi = Bsdf_reflect(-wo, h);
         }
         label = (refract ? BSDF_LABEL_TRANSMIT : 0) | (f->singular ? BSDF_LABEL_SINGULAR : BSDF_LABEL_GLOSSY);
         /* a straight refraction at index 1 is singular at any roughness */
         if (refract && fabs(f->glass_eta - 1.0f) < 1e-4f) {
             label = BSDF_LABEL_TRANSMIT | BSDF_LABEL_SINGULAR;
-            *wi = -wo;
+            gwi = -wo;
         }
-        if ((wi->z < 0.0f) != refract || (dot(*wi, f->ng) < 0.0f) != refract) return 0;
+        *wi = Bsdf_from_glossy(f, gwi);
+        if ((gwi.z < 0.0f) != refract || (dot(*wi, f->ng) < 0.0f) != refract) return 0;
         if (label & BSDF_LABEL_SINGULAR) {
             /* the chosen lobe alone, over its probability */
             float3 value;
@@ -311,7 +363,7 @@ inline bool Bsdf_likeliest(const Bsdf *f, float3 *wi) {
     float start = 0.0f;
     for (int i = 0; i < best; ++i) start += f->q[i];
     float3 r, t, weight;
-    Bsdf_glass_fresnel(f, f->wo.z, &r, &t);
+    Bsdf_glass_fresnel(f, f->gwo.z, &r, &t);
     float u3 = best == BSDF_GLASS && Bsdf_reflect_probability(r, t) < 0.5f ? 0.999f : 0.0f;
     float pdf;
     return Bsdf_sample(f, start + 0.5f * f->q[best], 0.5f, 0.5f, u3, wi, &weight, &pdf) != 0;

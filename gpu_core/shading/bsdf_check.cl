@@ -1,43 +1,45 @@
 /* The BSDF as tests probe it (tests/shading): directions sampled from one
  * material seen from one direction, and the BSDF evaluated on given
- * directions, both in the local frame of a surface facing +z. */
+ * directions, all in the frame of a surface whose geometric normal is +z. */
 #include "device/rng.h"
 #include "shading/bsdf.h"
 
-/* The BSDF of material m (base colour its own) seen from wo (local, wo.z
- * > 0), on a surface whose geometric and shading normals are +z. */
-inline Bsdf BsdfCheck_make(const __global Material *m, float4 wo, int entering, int sample) {
+/* The BSDF of material m (base colour its own) seen from wo (wo.z > 0) on
+ * a surface of geometric normal +z and smooth shading normal ns (ns.z > 0). */
+inline Bsdf BsdfCheck_make(const __global Material *m, float4 wo, float4 ns, int entering, int sample) {
     Material mat = *m;
-    float3 n = (float3)(0.0f, 0.0f, 1.0f);
-    return Bsdf_make(&mat, mat.base_color.xyz, normalize(wo.xyz), n, n, n, entering != 0, sample);
+    float3 n = normalize(ns.xyz);
+    return Bsdf_make(&mat, mat.base_color.xyz, normalize(wo.xyz), n, n, (float3)(0.0f, 0.0f, 1.0f), entering != 0,
+                     sample);
 }
 
 /* One sample per work item: direction (w = label), weight (w = pdf). */
-__kernel void BsdfCheck_sample(const __global Material *m, const float4 wo, const int entering, const int sample,
-                               const uint seed, const int n, __global float4 *out_dir, __global float4 *out_weight) {
+__kernel void BsdfCheck_sample(const __global Material *m, const float4 wo, const float4 ns, const int entering,
+                               const int sample, const uint seed, const int n, __global float4 *out_dir,
+                               __global float4 *out_weight) {
     int i = get_global_id(0);
     if (i >= n) return;
-    Bsdf f = BsdfCheck_make(m, wo, entering, sample);
+    Bsdf f = BsdfCheck_make(m, wo, ns, entering, sample);
     Rng rng = Rng_make((uint)i, 7u, seed);
     float u0 = Rng_next(&rng), u1 = Rng_next(&rng), u2 = Rng_next(&rng), u3 = Rng_next(&rng);
     float3 wi = (float3)(0.0f), weight = (float3)(0.0f);
     float pdf = 0.0f;
     int label = Bsdf_sample(&f, u0, u1, u2, u3, &wi, &weight, &pdf);
-    out_dir[i] = (float4)(wi, (float)label);
+    out_dir[i] = (float4)(Bsdf_to_world(&f, wi), (float)label);
     out_weight[i] = (float4)(weight, pdf);
 }
 
 /* The BSDF on direction wi[i]: diffuse part of f cos, glossy part (w =
  * pdf). */
-__kernel void BsdfCheck_eval(const __global Material *m, const float4 wo, const int entering, const int sample,
-                             const __global float4 *wi, const int n, __global float4 *out_diffuse,
+__kernel void BsdfCheck_eval(const __global Material *m, const float4 wo, const float4 ns, const int entering,
+                             const int sample, const __global float4 *wi, const int n, __global float4 *out_diffuse,
                              __global float4 *out_glossy) {
     int i = get_global_id(0);
     if (i >= n) return;
-    Bsdf f = BsdfCheck_make(m, wo, entering, sample);
+    Bsdf f = BsdfCheck_make(m, wo, ns, entering, sample);
     float3 d;
     float pdf;
-    float3 g = Bsdf_eval(&f, wi[i].xyz, &d, &pdf);
+    float3 g = Bsdf_eval(&f, Bsdf_to_local(&f, wi[i].xyz), &d, &pdf);
     out_diffuse[i] = (float4)(d, 0.0f);
     out_glossy[i] = (float4)(g, pdf);
 }

@@ -116,7 +116,8 @@ inline float Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
  * orthogonal to the interpolated normal) and its bitangent, built from
  * the normal as wound and turned back to face the ray, as Cycles' Normal
  * Map node; Strength blends it with the smooth normal. Cycles' tangents
- * are MikkTSpace's, per vertex; these are per triangle. Degenerate UVs
+ * are MikkTSpace's, per vertex; these are per triangle (the same where UVs
+ * run along the faces, as on a UV sphere). Degenerate UVs
  * keep the smooth normal. */
 inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, float strength) {
     int t = sp->tri;

@@ -202,13 +202,9 @@ def compare(bpy, tmp_path, material, lighting) -> tuple[np.ndarray, float]:
 # Known gaps (README, Looks and units), measured: the point light seen
 # through glass or in a near-mirror highlight (roughness 0.05) is a caustic
 # that the two renderers' samples disagree on pixel by pixel (rough glass under
-# the point light: mean 0.91-1.05 of Cycles, display RMSE 0.5-2.5). A normal
-# map under the point light has its mean within 1.1% (Cycles' bump shadowing
-# term is modelled) but a display RMSE of 0.10, nearly all of it on the lit
-# rim where the view grazes the sphere (not followed up; Cycles' tangents are
-# MikkTSpace's, per vertex, ours per triangle).
+# the point light: mean 0.91-1.05 of Cycles, display RMSE 0.5-2.5).
 KNOWN_GAPS = {("glass_r0.1", "point"), ("glass_r0.5", "point"), ("glass_node", "point"),
-              ("metal_r0.05", "point"), ("plastic_r0.05", "point"), ("normal_map", "point")}
+              ("metal_r0.05", "point"), ("plastic_r0.05", "point")}
 CASES = [pytest.param(material, lighting, marks=pytest.mark.xfail(strict=True, reason="known gap"))
          if (material, lighting) in KNOWN_GAPS else (material, lighting)
          for material in MATERIALS for lighting in ("point", "world")]

@@ -30,26 +30,33 @@ def view(cos_theta: float) -> np.ndarray:
     return np.array([np.sqrt(1 - cos_theta**2), 0.0, cos_theta, 0.0], np.float32)
 
 
-def sample(device, row, wo, n, entering=True, seed=1):
-    """n sampled directions (N, 3), labels, weights (N, 3), pdfs."""
+UP = np.array([0.0, 0.0, 1.0, 0.0], np.float32)
+
+
+def sample(device, row, wo, n, entering=True, seed=1, ns=UP):
+    """n sampled directions (N, 3), labels, weights (N, 3), pdfs, on a
+    surface of geometric normal +z and shading normal ``ns``."""
     out_dir, out_weight = device.empty(16 * n), device.empty(16 * n)
-    device.kernel(PROGRAM, "BsdfCheck_sample")(n, device.to_device(row), wo, np.int32(entering), np.int32(SAMPLE_ALL),
-                                               np.uint32(seed), np.int32(n), out_dir, out_weight)
+    device.kernel(PROGRAM, "BsdfCheck_sample")(n, device.to_device(row), wo, ns, np.int32(entering),
+                                               np.int32(SAMPLE_ALL), np.uint32(seed), np.int32(n), out_dir, out_weight)
     d = device.read(out_dir, (n, 4), np.float32)
     w = device.read(out_weight, (n, 4), np.float32)
     return d[:, :3].astype(np.float64), d[:, 3].astype(int), w[:, :3].astype(np.float64), w[:, 3].astype(np.float64)
 
 
-def evaluate(device, row, wo, wi, entering=True):
-    """f cos (diffuse + glossy, (N, 3)) and pdf at local directions wi."""
+def evaluate(device, row, wo, wi, entering=True, ns=UP, parts=False):
+    """f cos (diffuse + glossy, (N, 3)) and pdf at directions wi; with
+    ``parts`` the diffuse and glossy parts apart."""
     n = len(wi)
     dirs = np.zeros((n, 4), np.float32)
     dirs[:, :3] = wi
     out_d, out_g = device.empty(16 * n), device.empty(16 * n)
-    device.kernel(PROGRAM, "BsdfCheck_eval")(n, device.to_device(row), wo, np.int32(entering), np.int32(SAMPLE_ALL),
-                                             device.to_device(dirs), np.int32(n), out_d, out_g)
+    device.kernel(PROGRAM, "BsdfCheck_eval")(n, device.to_device(row), wo, ns, np.int32(entering),
+                                             np.int32(SAMPLE_ALL), device.to_device(dirs), np.int32(n), out_d, out_g)
     d = device.read(out_d, (n, 4), np.float32).astype(np.float64)
     g = device.read(out_g, (n, 4), np.float32).astype(np.float64)
+    if parts:
+        return d[:, :3], g[:, :3], g[:, 3]
     return d[:, :3] + g[:, :3], g[:, 3]
 
 
@@ -61,7 +68,7 @@ def evaluate(device, row, wo, wi, entering=True):
 THETA_BINS, PHI_BINS, SUB = 24, 24, 24
 
 
-def binned_pdf(device, row, wo, entering=True) -> np.ndarray:
+def binned_pdf(device, row, wo, entering=True, ns=UP) -> np.ndarray:
     """The pdf integrated over each (cos theta, phi) bin, by the midpoint
     rule on SUB x SUB points a bin."""
     fine_c = (np.arange(THETA_BINS * SUB) + 0.5) / (THETA_BINS * SUB) * 2 - 1
@@ -69,15 +76,15 @@ def binned_pdf(device, row, wo, entering=True) -> np.ndarray:
     c, p = np.meshgrid(fine_c, fine_p, indexing="ij")
     s = np.sqrt(1 - c**2)
     wi = np.stack([s * np.cos(p), s * np.sin(p), c], -1).reshape(-1, 3)
-    _, pdf = evaluate(device, row, wo, wi, entering)
+    _, pdf = evaluate(device, row, wo, wi, entering, ns)
     cell = (2.0 / (THETA_BINS * SUB)) * (2 * np.pi / (PHI_BINS * SUB))  # d(cos) d(phi) = solid angle
     return (pdf.reshape(THETA_BINS, SUB, PHI_BINS, SUB) * cell).sum(axis=(1, 3))
 
 
-def chi_square_p(device, row, wo, entering=True, n=400_000) -> float:
+def chi_square_p(device, row, wo, entering=True, n=400_000, ns=UP) -> float:
     """p-value of the sampled directions' histogram against the pdf (lost
     samples are a bin of their own; bins expecting fewer than 5 merged)."""
-    wi, label, _, _ = sample(device, row, wo, n, entering)
+    wi, label, _, _ = sample(device, row, wo, n, entering, ns=ns)
     assert not (label & LABEL_SINGULAR).any()
     ok = label != 0
     c = np.clip(wi[ok, 2], -1, 1)
@@ -85,7 +92,7 @@ def chi_square_p(device, row, wo, entering=True, n=400_000) -> float:
     ti = np.minimum(((c + 1) / 2 * THETA_BINS).astype(int), THETA_BINS - 1)
     pi = np.minimum((phi / (2 * np.pi) * PHI_BINS).astype(int), PHI_BINS - 1)
     observed = np.bincount(ti * PHI_BINS + pi, minlength=THETA_BINS * PHI_BINS).astype(np.float64)
-    expected = binned_pdf(device, row, wo, entering).ravel() * n
+    expected = binned_pdf(device, row, wo, entering, ns).ravel() * n
     observed = np.append(observed, n - ok.sum())
     expected = np.append(expected, max(n - expected.sum(), 0.0))
     order = np.argsort(expected)
@@ -179,6 +186,41 @@ def test_metal_colour_comes_through_multiple_scattering_saturated(device):
     smooth = albedo(device, material(base_color=(0.9, 0.5, 0.2), metallic=1.0, roughness=0.05), 0.7)
     assert rough[2] / rough[0] < smooth[2] / smooth[0]
     assert rough[0] > 0.75
+
+
+# -- a shading normal tilted away from the viewer -----------------------------------
+
+# a smooth normal at a silhouette (or a normal map's) facing away from a view
+# 72 degrees off the geometric normal
+AWAY_NORMAL = np.array([-0.6, 0.0, 0.8, 0.0], np.float32)
+GRAZING = view(0.3)
+
+
+def test_a_shading_normal_facing_away_keeps_the_diffuse_lobe_on_it(device):
+    assert float(AWAY_NORMAL[:3] @ GRAZING[:3]) < 0
+    row = material(base_color=(0.8, 0.5, 0.2), specular_ior_level=0.0)
+    diffuse, glossy, _ = evaluate(device, row, GRAZING, AWAY_NORMAL[None, :3], ns=AWAY_NORMAL, parts=True)
+    # f cos along the shading normal is albedo / pi (cos 1 there, not 0.8 as to +z)
+    np.testing.assert_allclose(diffuse[0], np.array([0.8, 0.5, 0.2]) / np.pi, rtol=1e-4)
+
+
+@pytest.mark.parametrize("row", [dict(metallic=1.0, roughness=0.5), dict(roughness=0.5),
+                                 dict(transmission=1.0, roughness=0.5)], ids=["metal", "plastic", "glass"])
+def test_glossy_lobes_on_a_normal_facing_away_sample_their_raised_normal(device, row):
+    # Cycles raises the glossy lobes' normal towards the geometric one just
+    # enough that the view's mirror direction leaves the surface: sampling
+    # and evaluation agree in that frame, reflections stay above the surface
+    row = material(base_color=(0.8, 0.8, 0.8), **row)
+    assert chi_square_p(device, row, GRAZING, ns=AWAY_NORMAL) > 1e-3
+    wi, label, weight, pdf = sample(device, row, GRAZING, 20_000, ns=AWAY_NORMAL)
+    reflected, transmitted = (label != 0) & ((label & 8) == 0), (label & 8) != 0
+    assert (label != 0).mean() > 0.3
+    assert (wi[reflected, 2] > 0).all() and (wi[transmitted, 2] < 0).all()
+    assert np.isfinite(weight).all() and weight.max() <= 4.0
+    ok = label != 0
+    f, pdf_eval = evaluate(device, row, GRAZING, wi[ok], ns=AWAY_NORMAL)
+    np.testing.assert_allclose(pdf_eval, pdf[ok], rtol=2e-3)
+    np.testing.assert_allclose(weight[ok] * pdf[ok, None], f, rtol=2e-3, atol=1e-7)
 
 
 # -- reciprocity and extremes --------------------------------------------------------
