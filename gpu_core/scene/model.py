@@ -318,13 +318,17 @@ class Scene:
         """Whether a triangle's material is see-through."""
         return bool((self.materials.alpha[self.used_materials()] < 1.0).any())
 
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(min, max) of triangles and positional lights; a unit box if empty."""
-        points = [self.triangles.reshape(-1, 3)]
-        positional = self.lights.kind != LIGHT_SUN
-        points.append(self.lights.position[positional])
-        pts = np.concatenate([p for p in points if len(p)], axis=0) if any(len(p) for p in points) else None
-        if pts is None or len(pts) == 0:
+    def triangle_bounds(self) -> np.ndarray:
+        """(2, 3): min and max of the triangles' corners; empty (0, 3) without triangles."""
+        corners = self.triangles.reshape(-1, 3)
+        return np.stack([corners.min(axis=0), corners.max(axis=0)]) if len(corners) else np.zeros((0, 3))
+
+    def bounds(self, triangle_bounds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) of triangles and positional lights; a unit box if empty.
+        ``triangle_bounds``: the triangles' own (triangle_bounds()), when known."""
+        triangles = self.triangle_bounds() if triangle_bounds is None else triangle_bounds
+        pts = np.concatenate([triangles, self.lights.position[self.lights.kind != LIGHT_SUN].reshape(-1, 3)])
+        if len(pts) == 0:
             return np.full(3, -1.0), np.full(3, 1.0)
         return pts.min(axis=0), pts.max(axis=0)
 

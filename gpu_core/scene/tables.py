@@ -34,12 +34,17 @@ class SceneTables:
     atlas: np.ndarray  # (T, 4) float32 texels of every texture
     texture_infos: np.ndarray  # TEXTURE_INFO_DTYPE rows
     camera: np.ndarray  # one CAMERA_DTYPE row
+    triangle_bounds: np.ndarray  # (2, 3) min and max of the triangles (kept while the geometry is)
 
 
 def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PARTS) -> SceneTables:
     """The tables of a validated ``scene``; those of ``previous`` are kept
     where no part they are made from is in ``changed``."""
-    lo, hi = scene.bounds()
+    if previous is not None and "geometry" not in changed:
+        triangle_bounds = previous.triangle_bounds
+    else:
+        triangle_bounds = scene.triangle_bounds()
+    lo, hi = scene.bounds(triangle_bounds)
     center = 0.5 * (lo + hi)
     moved = previous is None or not np.array_equal(center, previous.center)
     changed = set(PARTS) if moved else set(changed)
@@ -59,7 +64,8 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
     else:
         lights, emitted = old.lights, old.emitted
     camera = camera_struct(scene, center) if old is None or "camera" in changed else old.camera
-    return SceneTables(center, radius, materials, lights, emitted, emit_tris, emit_cdf, atlas, infos, camera)
+    return SceneTables(center, radius, materials, lights, emitted, emit_tris, emit_cdf, atlas, infos, camera,
+                       triangle_bounds)
 
 
 def scene_defines(scene: Scene) -> dict:

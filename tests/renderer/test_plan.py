@@ -162,3 +162,21 @@ def test_a_photon_share_traces_fewer_photons_only_where_the_maps_held_cannot_ser
     again = plan(validate(room(albedo=0.7)), quick, shared)
     assert again.photons_reused and again.photon_counts == (5_000, 5_000)
     assert plan(validate(room(albedo=0.7)), GI, shared).traces_photons
+
+
+def test_the_triangles_bounds_are_kept_while_the_geometry_is():
+    from gpu_core.scene.tables import scene_tables
+
+    scene = validate(room())
+    first = scene_tables(scene)
+    np.testing.assert_array_equal(first.triangle_bounds, [[-1, -1, -1], [1, 1, 1]])
+    kept = scene_tables(validate(moved_camera(room())), first, {"camera"})
+    assert kept.triangle_bounds is first.triangle_bounds
+    shifted = scene_tables(validate(room(shift=-0.5)), first, {"geometry"})
+    np.testing.assert_array_equal(shifted.triangle_bounds[0], [-1.5, -1, -1])
+    assert not np.array_equal(shifted.center, first.center)
+    # a light moved out of the box widens the bounds without reading the triangles again
+    far = room()
+    far.lights.position[0] = (0.0, 0.0, 5.0)
+    lit = scene_tables(validate(far), first, {"lights"})
+    assert lit.triangle_bounds is first.triangle_bounds and lit.center[2] == 2.0
