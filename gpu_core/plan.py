@@ -214,6 +214,8 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
         features.append("path_traced_indirect")
     if scene.has_textures():
         features.append("textures")
+        if scene.has_tangents():
+            features.append("corner_tangents")
     if len(tables.emit_tris):
         features.append("mesh_lights")
     if scene.has_alpha():
@@ -258,7 +260,8 @@ def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tup
     texels = len(tables.atlas) * 16
     window = scene.camera.pixel_window
     film = film_bytes(window, settings)
-    need = n * _TRIANGLE_BYTES + texels + film + tables.lights.nbytes + tables.materials.nbytes
+    need = n * (_TRIANGLE_BYTES + (48 if len(scene.tangents) else 0)) + texels + film + tables.lights.nbytes
+    need += tables.materials.nbytes
     largest = max(n * 48, texels, film)
     if settings.mode == "gi":
         x0, y0, x1, y1 = window

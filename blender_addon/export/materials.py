@@ -89,6 +89,20 @@ class MaterialTable:
         for i, (slot, row) in enumerate(zip(slots, rows)):
             self.rows[slot] = {**row, "mix_next": slots[i + 1] if i + 1 < len(slots) else -1}
 
+    def uses_normal_map(self, rows) -> bool:
+        """Whether a material of ``rows`` (table rows, their mixes
+        followed) bends normals by a normal map: its meshes need tangents."""
+        todo, seen = [int(r) for r in rows], set()
+        while todo:
+            row = todo.pop()
+            if row in seen or not 0 <= row < len(self.rows):
+                continue
+            seen.add(row)
+            if self.rows[row].get("normal_texture", -1) >= 0:
+                return True
+            todo.append(self.rows[row].get("mix_next", -1))
+        return False
+
     def forget(self, name: str) -> None:
         """Export the material ``name`` again at its next use (it was edited);
         its row keeps its place, so material ids stay."""

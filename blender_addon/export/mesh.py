@@ -22,6 +22,10 @@ class LocalMesh:
     uvs: np.ndarray  # (T, 3, 2) float32 of the UV map used for rendering
     slots: np.ndarray  # (T,) int32 material slot of each triangle
     materials: list  # the mesh's own materials, by slot
+    # (T, 3, 4) float32 MikkTSpace tangents of the render UV map per corner,
+    # w the bitangent's sign; None when not asked for or not computable
+    tangents: np.ndarray | None = None
+    tangents_asked: bool = False
 
 
 class MeshCache:
@@ -32,12 +36,14 @@ class MeshCache:
         self._meshes: dict = {}
         self.triangulated = 0  # meshes read from Blender so far
 
-    def local_mesh(self, obj) -> LocalMesh | None:
-        """The triangulated evaluated mesh of ``obj``, or None if it has no faces."""
+    def local_mesh(self, obj, tangents: bool = False) -> LocalMesh | None:
+        """The triangulated evaluated mesh of ``obj``, or None if it has no
+        faces; with ``tangents`` (a normal map uses them) its corner tangents too."""
         data = obj.data
         key = (obj.name_full, data.name_full if data is not None else "", data.as_pointer() if data is not None else 0)
-        if key not in self._meshes:
-            self._meshes[key] = _triangulate(obj)
+        kept = self._meshes.get(key, False)
+        if kept is False or (tangents and kept is not None and not kept.tangents_asked):
+            self._meshes[key] = _triangulate(obj, tangents)
             self.triangulated += 1
         return self._meshes[key]
 
@@ -47,8 +53,9 @@ class MeshCache:
             del self._meshes[key]
 
 
-def _triangulate(obj) -> LocalMesh | None:
-    """Read the evaluated mesh of ``obj``; the temporary mesh is always freed."""
+def _triangulate(obj, tangents: bool = False) -> LocalMesh | None:
+    """Read the evaluated mesh of ``obj`` (with ``tangents``, its corner
+    tangents); the temporary mesh is always freed."""
     try:
         mesh = obj.to_mesh()
     except RuntimeError:
@@ -84,9 +91,29 @@ def _triangulate(obj) -> LocalMesh | None:
             uvs=uvs,
             slots=slots,
             materials=list(mesh.materials),
+            tangents=_corner_tangents(mesh, uv_layer, tri_loops) if tangents else None,
+            tangents_asked=tangents,
         )
     finally:
         obj.to_mesh_clear()
+
+
+def _corner_tangents(mesh, uv_layer, tri_loops: np.ndarray) -> np.ndarray | None:
+    """MikkTSpace tangents and bitangent signs of the render UV map at each
+    triangle corner, as Cycles reads them; None without UVs or where
+    Blender cannot compute them (faces of more than four corners)."""
+    if uv_layer is None:
+        return None
+    try:
+        mesh.calc_tangents(uvmap=uv_layer.name)
+    except RuntimeError:
+        return None
+    loops = len(mesh.loops)
+    tangent, sign = np.empty(loops * 3, np.float32), np.empty(loops, np.float32)
+    mesh.loops.foreach_get("tangent", tangent)
+    mesh.loops.foreach_get("bitangent_sign", sign)
+    rows = np.concatenate([tangent.reshape(-1, 3), sign[:, None]], axis=1)
+    return rows[tri_loops].reshape(-1, 3, 4)
 
 
 def _render_uv_layer(mesh):
@@ -97,11 +124,13 @@ def _render_uv_layer(mesh):
     return mesh.uv_layers.active
 
 
-def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World positions (float64), unit world normals and UVs of a local mesh.
+def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """World positions (float64), unit world normals, UVs and unit world
+    tangents (None without) of a local mesh.
 
-    Normals use the inverse transpose; a mirroring matrix reverses each
-    triangle's corner order so that winding and normals stay consistent.
+    Normals use the inverse transpose, tangents the matrix itself; a
+    mirroring matrix reverses each triangle's corner order so that winding
+    and normals stay consistent, and the bitangents' signs with it.
     """
     m = np.asarray(matrix, np.float64)
     lin, offset = m[:3, :3], m[:3, 3]
@@ -111,7 +140,14 @@ def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndar
     n = local.normals.astype(np.float64) @ normal_matrix.T
     length = np.linalg.norm(n, axis=-1, keepdims=True)
     n = np.where(length > 0, n / np.where(length > 0, length, 1.0), 0.0)
-    uvs = local.uvs
+    uvs, tangents = local.uvs, None
+    if local.tangents is not None:
+        t = local.tangents[..., :3].astype(np.float64) @ lin.T
+        length = np.linalg.norm(t, axis=-1, keepdims=True)
+        t = np.where(length > 0, t / np.where(length > 0, length, 1.0), 0.0)
+        tangents = np.concatenate([t, local.tangents[..., 3:] * (-1.0 if det < 0 else 1.0)], axis=-1).astype(np.float32)
     if det < 0:
         world, n, uvs = world[:, ::-1], n[:, ::-1], uvs[:, ::-1]
-    return world, n.astype(np.float32), np.ascontiguousarray(uvs)
+        tangents = tangents[:, ::-1] if tangents is not None else None
+    return world, n.astype(np.float32), np.ascontiguousarray(uvs), (np.ascontiguousarray(tangents)
+                                                                    if tangents is not None else None)

@@ -75,6 +75,7 @@ class _Instance:
     world: np.ndarray
     normals: np.ndarray
     uvs: np.ndarray
+    tangents: np.ndarray | None
     ids: np.ndarray
 
 
@@ -143,7 +144,11 @@ class SceneSync:
                 checked.add(obj.name_full)
                 _warn_object_settings(obj, warnings)
             key = _instance_key(inst)
-            instances[key] = self._instance(key, inst, local, _slot_rows(obj, local.materials, table))
+            slot_rows = _slot_rows(obj, local.materials, table)
+            if table.uses_normal_map(slot_rows) and not local.tangents_asked:
+                local = self._meshes.local_mesh(obj, tangents=True)
+                slot_rows = _slot_rows(obj, local.materials, table)
+            instances[key] = self._instance(key, inst, local, slot_rows)
             order.append(key)
         warnings.extend(f"{kind} objects are not supported and were skipped" for kind in sorted(skipped_types))
         warnings.extend(table.warnings)
@@ -189,9 +194,9 @@ class SceneSync:
                 and kept.slot_rows == slot_rows.tobytes()):
             return kept
         self.stats.instances_transformed += 1
-        world, normals, uvs = transform(local, matrix)
+        world, normals, uvs, tangents = transform(local, matrix)
         ids = slot_rows[np.clip(local.slots, 0, len(slot_rows) - 1)]
-        return _Instance(local, matrix.tobytes(), slot_rows.tobytes(), world, normals, uvs, ids)
+        return _Instance(local, matrix.tobytes(), slot_rows.tobytes(), world, normals, uvs, tangents, ids)
 
     # -- the scene ----------------------------------------------------------------
 
@@ -203,7 +208,7 @@ class SceneSync:
         same_geometry = (last is not None and list(self._instances) == order
                          and all(self._instances[key] is instances[key] for key in order))
         if same_geometry:
-            geometry = (last.triangles, last.normals, last.uvs, last.material_ids)
+            geometry = (last.triangles, last.normals, last.uvs, last.material_ids, last.tangents)
         else:
             edits.add("geometry")
             geometry = _concatenated([instances[key] for key in order])
@@ -223,7 +228,7 @@ class SceneSync:
         scene = Scene(triangles=geometry[0], normals=geometry[1], uvs=geometry[2], material_ids=geometry[3],
                       materials=materials, lights=lights, camera=camera, world_color=world_color,
                       textures=list(table.textures), texture_closest=list(table.texture_closest),
-                      warnings=list(dict.fromkeys(warnings)))
+                      tangents=geometry[4], warnings=list(dict.fromkeys(warnings)))
         return scene, edits
 
 
@@ -236,12 +241,18 @@ def _instance_key(inst) -> tuple:
 
 
 def _concatenated(parts: list[_Instance]) -> tuple:
-    """The scene's geometry arrays from its instances' (empty ones without any)."""
+    """The scene's geometry arrays from its instances' (empty ones without
+    any); corner tangents where an instance has them, zero rows elsewhere,
+    none at all when no instance has them."""
     if not parts or not sum(len(p.world) for p in parts):
         return (np.zeros((0, 3, 3)), np.zeros((0, 3, 3), np.float32), np.zeros((0, 3, 2), np.float32),
-                np.zeros(0, np.int32))
+                np.zeros(0, np.int32), np.zeros((0, 3, 4), np.float32))
+    tangents = np.zeros((0, 3, 4), np.float32)
+    if any(p.tangents is not None for p in parts):
+        tangents = np.concatenate([p.tangents if p.tangents is not None else np.zeros((len(p.world), 3, 4), np.float32)
+                                   for p in parts])
     return (np.concatenate([p.world for p in parts]), np.concatenate([p.normals for p in parts]),
-            np.concatenate([p.uvs for p in parts]), np.concatenate([p.ids for p in parts]).astype(np.int32))
+            np.concatenate([p.uvs for p in parts]), np.concatenate([p.ids for p in parts]).astype(np.int32), tangents)
 
 
 def _same_columns(a, b) -> bool:

@@ -250,6 +250,10 @@ class Scene:
     world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
     textures: list[np.ndarray] = field(default_factory=list)  # (H, W, 4) float32, linear
     texture_closest: list[bool] = field(default_factory=list)  # per texture: the nearest texel, not bilinear
+    # (N, 3, 4) float32 per corner: the normal map's tangent (world) and in w
+    # its bitangent's sign, as MikkTSpace gives them; empty (0, 3, 4): none
+    # (tangents then come from each triangle's UVs); a zero tangent, the same
+    tangents: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 4), np.float32))
     warnings: list[str] = field(default_factory=list)
     report: ValidationReport = field(default_factory=ValidationReport)
 
@@ -307,6 +311,10 @@ class Scene:
                 low[row], high[row] = np.clip([np.nanmin(texels), np.nanmax(texels)], 0.0, 1.0)
         return low, high
 
+    def has_tangents(self) -> bool:
+        """Whether corner tangents are given and a triangle's material has a normal map."""
+        return len(self.tangents) > 0 and bool((self.materials.normal_texture[self.used_materials()] >= 0).any())
+
     def has_textures(self) -> bool:
         """Whether a triangle's material reads a texture."""
         used, m = self.used_materials(), self.materials
@@ -353,7 +361,7 @@ def part_digests(scene: Scene, parts=PARTS) -> dict[str, bytes]:
     photon maps, the GI cache)."""
     m, lights, camera = scene.materials, scene.lights, scene.camera
     arrays = {
-        "geometry": lambda: [scene.triangles, scene.normals, scene.uvs, scene.material_ids],
+        "geometry": lambda: [scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.tangents],
         "materials": lambda: ([getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures)
                               + [np.asarray(scene.texture_closest, bool)]),
         "lights": lambda: [getattr(lights, f.name) for f in fields(Lights) if f.name != "names"],

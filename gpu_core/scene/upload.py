@@ -33,6 +33,7 @@ class SceneBuffers:
     tree: kdtree.KdTree
     normals: cl.Buffer  # float4 per triangle corner
     uvs: cl.Buffer  # float2 per triangle corner
+    tangents: cl.Buffer  # float4 per triangle corner (one zero row when the scene has none)
     material_ids: cl.Buffer  # int per triangle
     materials: cl.Buffer  # Material rows
     lights: cl.Buffer  # Light rows
@@ -49,7 +50,8 @@ class SceneBuffers:
         """Arguments matching SCENE_PARAMS in shading/scene.h, in order."""
         world = self.world.copy()
         world[3] = 1.0 if transparent else 0.0
-        return [*self.tree.kernel_args(), self.normals, self.uvs, self.material_ids, self.materials, self.atlas,
+        return [*self.tree.kernel_args(), self.normals, self.uvs, self.tangents, self.material_ids, self.materials,
+                self.atlas,
                 self.texture_infos, self.lights, np.int32(self.light_count), self.emit_tris, self.emit_cdf,
                 np.int32(self.emit_count), self.camera, world]
 
@@ -71,9 +73,9 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
         with timer.stage("upload"):
             geometry = (tree, device.to_device(float4_rows(scene.normals.reshape(-1, 3))),
                         device.to_device(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),
-                        device.to_device(scene.material_ids))
+                        device.to_device(scene.material_ids), device.to_device(_corner_tangents(scene)))
     else:
-        geometry = (old.tree, old.normals, old.uvs, old.material_ids)
+        geometry = (old.tree, old.normals, old.uvs, old.material_ids, old.tangents)
     with timer.stage("upload"):
         if old is None or changed & {"geometry", "materials"}:
             emitters = (device.to_device(tables.emit_tris), device.to_device(tables.emit_cdf), len(tables.emit_tris))
@@ -91,6 +93,15 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
         camera = device.to_device(tables.camera) if old is None or "camera" in changed else old.camera
     return SceneBuffers(
         device=device, center=tables.center, radius=tables.radius, tree=geometry[0], normals=geometry[1],
-        uvs=geometry[2], material_ids=geometry[3], materials=materials[0], lights=lights[0], light_count=lights[1],
+        uvs=geometry[2], material_ids=geometry[3], tangents=geometry[4], materials=materials[0], lights=lights[0],
+        light_count=lights[1],
         emit_tris=emitters[0], emit_cdf=emitters[1], emit_count=emitters[2], atlas=materials[1],
         texture_infos=materials[2], camera=camera, world=np.append(scene.world_color, 0.0).astype(np.float32))
+
+
+def _corner_tangents(scene: Scene) -> np.ndarray:
+    """The float4 corner tangents the kernels read: the scene's, or one zero
+    row without any."""
+    if not len(scene.tangents):
+        return np.zeros((1, 4), np.float32)
+    return np.ascontiguousarray(scene.tangents.reshape(-1, 4), np.float32)

@@ -28,7 +28,7 @@ def validate(scene: Scene, memo: "GeometryMemo | None" = None) -> Scene:
     report = ValidationReport()
     warnings = list(scene.warnings)
     _check_camera(scene.camera)
-    tris, normals, uvs, mat_ids, needs_default = (memo or GeometryMemo()).geometry(scene, report)
+    tris, normals, uvs, mat_ids, tangents, needs_default = (memo or GeometryMemo()).geometry(scene, report)
     materials = _with_default_material(scene.materials) if needs_default else scene.materials
     materials, repaired = _finite_materials(materials)
     report.repaired_materials = len(repaired)
@@ -43,8 +43,8 @@ def validate(scene: Scene, memo: "GeometryMemo | None" = None) -> Scene:
     report.messages = warnings
     return Scene(triangles=tris, normals=normals, uvs=uvs, material_ids=mat_ids,
                  materials=materials, lights=lights, camera=scene.camera, world_color=world,
-                 textures=list(scene.textures), texture_closest=list(scene.texture_closest), warnings=warnings,
-                 report=report)
+                 textures=list(scene.textures), texture_closest=list(scene.texture_closest), tangents=tangents,
+                 warnings=warnings, report=report)
 
 
 _GEOMETRY_COUNTS = ("dropped_nonfinite_triangles", "dropped_degenerate_triangles", "repaired_material_ids",
@@ -60,19 +60,22 @@ class GeometryMemo:
         self._result: tuple = ()
 
     def geometry(self, scene: Scene, report: ValidationReport) -> tuple:
-        """(triangles, normals, uvs, material ids, whether a default
-        material is needed) of ``scene``, its repairs counted in ``report``."""
-        key = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, len(scene.materials))
-        if not (len(key) == len(self._key) and all(a is b for a, b in zip(key[:4], self._key[:4]))
-                and key[4] == self._key[4]):
+        """(triangles, normals, uvs, material ids, corner tangents, whether a
+        default material is needed) of ``scene``, its repairs counted in ``report``."""
+        key = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.tangents, len(scene.materials))
+        if not (len(key) == len(self._key) and all(a is b for a, b in zip(key[:5], self._key[:5]))
+                and key[5] == self._key[5]):
             counted = ValidationReport()
-            tris, normals, uvs, mat_ids, cross = _valid_triangles(scene, counted)
+            tris, normals, uvs, mat_ids, tangents, cross = _valid_triangles(scene, counted)
             materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, counted)
             normals = _repaired_normals(normals, cross, counted).astype(np.float32)
             uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
+            # a corner tangent that is not finite is no tangent (the triangle's UVs give one)
+            tangents = np.where(np.isfinite(tangents).all(axis=-1, keepdims=True), tangents, 0.0).astype(np.float32)
             counts = {name: getattr(counted, name) for name in _GEOMETRY_COUNTS}
             self._key = key
-            self._result = (tris, normals, uvs, mat_ids.astype(np.int32), materials is not scene.materials, counts)
+            self._result = (tris, normals, uvs, mat_ids.astype(np.int32), tangents, materials is not scene.materials,
+                            counts)
         *geometry, counts = self._result
         for name, value in counts.items():
             setattr(report, name, value)
@@ -81,12 +84,16 @@ class GeometryMemo:
 
 def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
     """The triangles with finite corners and some area, with their normals,
-    uvs, material ids and (unnormalised) face normals."""
+    uvs, material ids, corner tangents (none, or one row per triangle) and
+    (unnormalised) face normals."""
     tris = np.asarray(scene.triangles, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tris)
     normals = _shaped(scene.normals, (n, 3, 3), np.float32)
     uvs = _shaped(scene.uvs, (n, 3, 2), np.float32)
     mat_ids = _shaped(scene.material_ids, (n,), np.int32)
+    given = scene.tangents
+    tangents = (np.zeros((0, 3, 4), np.float32) if given is None or np.size(given) == 0
+                else _shaped(given, (n, 3, 4), np.float32))
     finite = np.isfinite(tris).all(axis=(1, 2))
     report.dropped_nonfinite_triangles = int((~finite).sum())
     with np.errstate(invalid="ignore", over="ignore"):
@@ -100,7 +107,7 @@ def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
         degenerate = finite & ~(area2 > np.maximum(1e-12 * np.square(longest), noise))
     report.dropped_degenerate_triangles = int(degenerate.sum())
     keep = finite & ~degenerate
-    return tris[keep], normals[keep], uvs[keep], mat_ids[keep], cross[keep]
+    return tris[keep], normals[keep], uvs[keep], mat_ids[keep], tangents[keep] if len(tangents) else tangents, cross[keep]
 
 
 def _valid_material_ids(materials: Materials, mat_ids: np.ndarray, report: ValidationReport):

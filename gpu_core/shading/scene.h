@@ -8,6 +8,7 @@
 
 #define SCENE_PARAMS                                                                              \
     KDTREE_PARAMS, const __global float4 *sc_normals, const __global float2 *sc_uvs,              \
+        const __global float4 *sc_tangents,                                                      \
         const __global int *sc_material_of, const __global Material *sc_materials,               \
         const __global float4 *sc_atlas, const __global TextureInfo *sc_textures,                \
         const __global Light *sc_lights, const int sc_light_count, const __global int *sc_emit_tris, \
@@ -18,6 +19,7 @@ typedef struct {
     KdTree tree;
     const __global float4 *normals;   /* 3 corner normals per triangle */
     const __global float2 *uvs;       /* 3 corner uvs per triangle */
+    const __global float4 *tangents;  /* 3 corner tangents per triangle (SCENE_HAS_TANGENTS), w: bitangent sign */
     const __global int *material_of;  /* material row of each triangle */
     const __global Material *materials;
     const __global float4 *atlas;     /* every texture's texels */
@@ -30,7 +32,7 @@ typedef struct {
 } SceneView;
 
 #define SCENE_MAKE()                                                                              \
-    ((SceneView){KDTREE_MAKE(), sc_normals, sc_uvs, sc_material_of, sc_materials, sc_atlas,       \
+    ((SceneView){KDTREE_MAKE(), sc_normals, sc_uvs, sc_tangents, sc_material_of, sc_materials, sc_atlas,       \
                  sc_textures, sc_lights, sc_light_count,                                          \
                  {sc_emit_tris, sc_emit_cdf, sc_emit_count, kd_verts, sc_material_of, sc_materials}, \
                  sc_camera, sc_world})

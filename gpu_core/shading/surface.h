@@ -15,6 +15,7 @@ typedef struct {
     float3 smooth; /* the interpolated normal (ns before a normal map) */
     float3 ng_raw; /* geometric normal as wound */
     float2 uv;
+    float2 bary;   /* barycentric weights of the hit's second and third corners */
     int tri;
     float eps;     /* offset for rays leaving this point */
 } SurfacePoint;
@@ -55,6 +56,7 @@ inline SurfacePoint Surface_at(const SceneView *sc, float3 dir, const Hit *hit) 
     s.ns = dot(ns, s.ng) < 0.0f ? -ns : ns;
     s.smooth = s.ns;
     s.uv = Surface_uv(sc, hit);
+    s.bary = (float2)(hit->u, hit->v);
     s.tri = t;
     /* p is rounded like the largest vertex coordinate it was made from */
     s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
@@ -111,31 +113,44 @@ inline float Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
 #endif
 }
 
-/* The shading normal of a tangent-space normal map: texel c (0..1 per
- * channel, 0.5 flat) in the frame of the triangle's UV tangent (made
- * orthogonal to the interpolated normal) and its bitangent, built from
- * the normal as wound and turned back to face the ray, as Cycles' Normal
- * Map node; Strength blends it with the smooth normal. Cycles' tangents
- * are MikkTSpace's, per vertex; these are per triangle (the same where UVs
- * run along the faces, as on a UV sphere). Degenerate UVs
- * keep the smooth normal. */
-inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, float strength) {
+/* The tangent of a normal map at sp (in w its bitangent's sign) for the
+ * normal n as wound: the corners' tangents interpolated (MikkTSpace's, per
+ * vertex, as Cycles uses them) where the scene has them, else the
+ * triangle's UV direction made orthogonal to n with the sign of the UV
+ * winding (the same where UVs run along the faces, as on a UV sphere).
+ * w = 0: no tangent (degenerate UVs). */
+inline float4 Surface_tangent(const SceneView *sc, const SurfacePoint *sp, float3 n) {
     int t = sp->tri;
+#ifdef SCENE_HAS_TANGENTS
+    const __global float4 *corner = sc->tangents + 3 * t;
+    float4 mikk = (1.0f - sp->bary.x - sp->bary.y) * corner[0] + sp->bary.x * corner[1] + sp->bary.y * corner[2];
+    if (dot(mikk.xyz, mikk.xyz) > 1e-12f && mikk.w != 0.0f) return mikk;
+#endif
     const __global float4 *verts = sc->tree.verts;
     float3 e1 = verts[3 * t + 1].xyz - verts[3 * t].xyz, e2 = verts[3 * t + 2].xyz - verts[3 * t].xyz;
     float2 d1 = sc->uvs[3 * t + 1] - sc->uvs[3 * t], d2 = sc->uvs[3 * t + 2] - sc->uvs[3 * t];
     float det = d1.x * d2.y - d2.x * d1.y;
-    if (!(fabs(det) > 1e-20f)) return;
+    if (!(fabs(det) > 1e-20f)) return (float4)(0.0f);
     float3 tu = (e1 * d2.y - e2 * d1.y) / det, tv = (e2 * d1.x - e1 * d2.x) / det;
+    float3 tangent = tu - n * dot(n, tu);
+    float tl = length(tangent);
+    if (!(tl > 0.0f) || !isfinite(tl)) return (float4)(0.0f);
+    return (float4)(tangent / tl, dot(cross(sp->ng_raw, tu), tv) < 0.0f ? -1.0f : 1.0f);
+}
+
+/* The shading normal of a tangent-space normal map: texel c (0..1 per
+ * channel, 0.5 flat) in the frame of the tangent (Surface_tangent) and its
+ * bitangent, built from the normal as wound and turned back to face the
+ * ray, as Cycles' Normal Map node; Strength blends it with the smooth
+ * normal. Without a tangent the smooth normal is kept. */
+inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, float strength) {
     /* the normal as wound (the side the ray came from flips it back below) */
     float facing = dot(sp->ng_raw, sp->ng) > 0.0f ? 1.0f : -1.0f;
     float3 n = facing * sp->ns;
-    float3 tangent = tu - n * dot(n, tu);
-    float tl = length(tangent);
-    if (!(tl > 0.0f) || !isfinite(tl)) return;
-    tangent /= tl;
-    float sign = dot(cross(sp->ng_raw, tu), tv) < 0.0f ? -1.0f : 1.0f;
-    float3 b = sign * cross(n, tangent);
+    float4 t = Surface_tangent(sc, sp, n);
+    if (t.w == 0.0f) return;
+    float3 tangent = t.xyz;
+    float3 b = t.w * cross(n, tangent);
     float3 m = 2.0f * c.xyz - 1.0f;
     float3 mapped = m.x * tangent + m.y * b + m.z * n;
     float ml = length(mapped);

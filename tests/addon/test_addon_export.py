@@ -238,6 +238,66 @@ def test_textures_on_roughness_metallic_and_a_normal_map_are_exported(bpy):
     assert not any("Roughness" in w or "Metallic" in w or "Normal" in w for w in scene.warnings)
 
 
+def _normal_mapped(bpy):
+    """A Principled material with a flat normal map on its Normal input."""
+    mat, node = _material(bpy, "ShaderNodeBsdfPrincipled")
+    normal_map = mat.node_tree.nodes.new("ShaderNodeNormalMap")
+    bumps = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    bumps.image = _image(bpy, "flat", [0.5, 0.5, 1.0, 1.0])
+    mat.node_tree.links.new(bumps.outputs["Color"], normal_map.inputs["Color"])
+    mat.node_tree.links.new(normal_map.outputs["Normal"], node.inputs["Normal"])
+    return mat
+
+
+def test_meshes_under_a_normal_map_carry_mikktspace_corner_tangents(bpy):
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1, location=(0, 0, 0))
+    sphere = bpy.context.object
+    bpy.ops.object.shade_smooth()
+    sphere.data.materials.append(_normal_mapped(bpy))
+    sphere.scale = (1.0, 1.0, -1.0)  # mirrored: the bitangents' signs turn with it
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(4, 0, 0))  # no normal map: no tangents of its own
+    scene = _export(bpy)
+    on_sphere = np.linalg.norm(scene.triangles.mean(axis=1), axis=1) < 2
+    assert scene.tangents.shape == (len(scene.triangles), 3, 4) and scene.has_tangents()
+    t, sign = scene.tangents[on_sphere, :, :3], scene.tangents[on_sphere, :, 3]
+    np.testing.assert_allclose(np.linalg.norm(t, axis=-1), 1.0, atol=1e-5)
+    np.testing.assert_allclose(np.abs(np.einsum("tcj,tcj->tc", t, scene.normals[on_sphere])), 0.0, atol=2e-3)
+    # Blender's own MikkTSpace tangents at each triangle's corners, mirrored
+    # by the object's scale (the corner order reversed with the winding)
+    mesh = sphere.data
+    mesh.calc_tangents(uvmap=mesh.uv_layers.active.name)
+    mesh.calc_loop_triangles()
+    loops = np.array([tri.loops[:] for tri in mesh.loop_triangles])[:, ::-1]
+    want_t = np.array([loop.tangent[:] for loop in mesh.loops])[loops] * [1.0, 1.0, -1.0]
+    want_sign = -np.array([loop.bitangent_sign for loop in mesh.loops])[loops]
+    np.testing.assert_allclose(t, want_t / np.linalg.norm(want_t, axis=-1, keepdims=True), atol=1e-5)
+    np.testing.assert_array_equal(sign, want_sign)
+    np.testing.assert_array_equal(scene.tangents[~on_sphere], 0.0)
+
+
+def test_a_material_edit_that_adds_a_normal_map_gives_the_mesh_its_tangents(bpy):
+    from blender_addon.export.sync import SceneSync, read_updates
+
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    plain, node = _material(bpy, "ShaderNodeBsdfPrincipled")
+    bpy.context.object.data.materials.append(plain)
+    sync, camera = SceneSync(), _export(bpy).camera
+    first, _ = sync.export(bpy.context.evaluated_depsgraph_get(), camera)
+    assert len(first.tangents) == 0
+    updates = []
+    handler = lambda scene, depsgraph: updates.extend(read_updates(depsgraph))  # noqa: E731
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        mapped = _normal_mapped(bpy)
+        bpy.context.object.data.materials[0] = mapped
+        bpy.context.evaluated_depsgraph_get().update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+    second, changed = sync.export(bpy.context.evaluated_depsgraph_get(), camera, updates)
+    assert "geometry" in changed and second.tangents.shape == (2, 3, 4)
+    np.testing.assert_allclose(np.abs(second.tangents[..., 0]), 1.0, atol=1e-5)  # the plane's U runs along x
+
+
 def test_a_bump_node_on_normal_is_named_in_the_warnings(bpy):
     bpy.ops.mesh.primitive_plane_add(size=1)
     mat, node = _material(bpy, "ShaderNodeBsdfPrincipled")

@@ -101,6 +101,23 @@ def test_normal_map_tilted_toward_the_sun_receives_it_head_on(device, azimuth):
     np.testing.assert_allclose(render(device, flat), full * np.cos(theta), rtol=0.01)
 
 
+def test_corner_tangents_given_with_the_scene_orient_the_normal_map(device):
+    # the map tilts the normal along its tangent; corner tangents along +y
+    # (as MikkTSpace gives them) turn it toward a sun from +y, where the
+    # plane's UVs alone (u along x) would turn it sideways
+    theta = np.radians(50)
+    scene, _ = sun_scene(np.pi / 2, theta, normal_texture=0)
+    scene.textures = [normal_texel((np.sin(theta), 0.0, np.cos(theta)))]
+    scene.tangents = np.tile(np.array([0.0, 1.0, 0.0, 1.0], np.float32), (len(scene.triangles), 3, 1))
+    assert scene.has_tangents()
+    full = ALBEDO / np.pi * 2.0 * bump_shadowing(theta, theta)
+    result = Renderer(device).render(scene, RenderSettings(samples=8))
+    assert "corner_tangents" in result.stats["plan"]
+    np.testing.assert_allclose(result.passes["Combined"][..., :3], full, rtol=0.01)
+    scene.tangents[:] = 0.0  # no tangent given: the triangle's UV direction
+    np.testing.assert_allclose(render(device, scene).mean(), full * np.cos(theta) ** 2, rtol=0.01)
+
+
 def test_normal_map_tilted_away_from_the_sun_receives_it_more_obliquely(device):
     theta, tilt = np.radians(20), np.radians(30)
     scene, _ = sun_scene(0.0, theta, normal_texture=0)

@@ -60,6 +60,21 @@ def test_nonfinite_triangles_are_dropped_and_counted(bad_value):
     assert any("NaN/Inf" in w and "2 " in w for w in out.warnings)
 
 
+def test_corner_tangents_follow_the_triangles_kept_and_nonfinite_ones_become_none():
+    tris = quad((0, 0, 0), 1.0)
+    collinear = np.array([[[0, 0, 0], [1, 1, 1], [2, 2, 2]]], np.float64)
+    scene = _scene(np.concatenate([tris, collinear]))
+    scene.tangents = np.tile(np.array([1.0, 0.0, 0.0, -1.0], np.float32), (3, 3, 1))
+    scene.tangents[1, 2] = (np.nan, 0.0, 0.0, 1.0)
+    out = validate(scene)
+    assert out.tangents.shape == (2, 3, 4) and np.isfinite(out.tangents).all()
+    np.testing.assert_array_equal(out.tangents[1, 2], 0.0)
+    np.testing.assert_array_equal(out.tangents[0], scene.tangents[0])
+    scene.tangents = np.zeros((2, 3, 4), np.float32)  # one row short
+    with pytest.raises(SceneError):
+        validate(scene)
+
+
 def test_zero_area_triangles_are_dropped_but_tiny_far_triangles_kept():
     collinear = [[[0, 0, 0], [1, 1, 1], [2, 2, 2]]]
     repeated = [[[0, 0, 0], [0, 0, 0], [1, 0, 0]]]
