@@ -110,6 +110,16 @@ __kernel void KdBuild_chunk_nodes(const __global int4 *act_info,
     for (int k = 0; k < chunks; ++k) chunk_node[chunk_base[i] + k] = i;
 }
 
+/* The elements [*begin, *end) of chunk c and its node. */
+inline int KdBuild_chunk_range(const __global int4 *act_info, const __global int *chunk_base,
+                               const __global int *chunk_node, int c, int *begin, int *end) {
+    int node = chunk_node[c];
+    int4 info = act_info[node];
+    *begin = info.x + (c - chunk_base[node]) * KD_CHUNK;
+    *end = min(*begin + KD_CHUNK, info.x + info.y);
+    return node;
+}
+
 /* Bounds of each chunk's elements by a work-group reduction (one group per
  * chunk, power-of-two size up to KD_CHUNK); also tags elements with their
  * node. */
@@ -123,10 +133,8 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
                                    __global float4 *chunk_hi) {
     __local float4 lo_s[KD_CHUNK], hi_s[KD_CHUNK];
     int c = get_group_id(0), lid = get_local_id(0), size = get_local_size(0);
-    int node = chunk_node[c];
-    int4 info = act_info[node];
-    int begin = info.x + (c - chunk_base[node]) * KD_CHUNK;
-    int end = min(begin + KD_CHUNK, info.x + info.y);
+    int begin, end;
+    int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);
     float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
     for (int e = begin + lid; e < end; e += size) {
         lo = fmin(lo, el_lo[e]);
@@ -147,6 +155,31 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
         chunk_lo[c] = lo_s[0];
         chunk_hi[c] = hi_s[0];
     }
+}
+
+/* The same with one work-item per chunk and no barriers (a CPU, where a
+ * group of mostly idle work-items and its barriers cost more than the
+ * loop: most chunks of the deeper levels hold a few elements). */
+__kernel void KdBuild_chunk_bounds_serial(const __global int4 *act_info,
+                                          const __global int *chunk_base,
+                                          const __global int *chunk_node,
+                                          const __global float4 *el_lo,
+                                          const __global float4 *el_hi,
+                                          __global int *el_node,
+                                          __global float4 *chunk_lo,
+                                          __global float4 *chunk_hi, const int chunks) {
+    int c = get_global_id(0);
+    if (c >= chunks) return;
+    int begin, end;
+    int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);
+    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+    for (int e = begin; e < end; ++e) {
+        lo = fmin(lo, el_lo[e]);
+        hi = fmax(hi, el_hi[e]);
+        el_node[e] = node;
+    }
+    chunk_lo[c] = lo;
+    chunk_hi[c] = hi;
 }
 
 /* Per node: its bounds from its chunks (segmented reduction, the chunks of
@@ -480,14 +513,23 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
     int e = c / 6, axis = (c % 6) >> 1, side = c & 1;
     int4 root = small_roots[sel_root[e]];
     float plane = Axis_of(side ? sel_hi[e] : sel_lo[e], axis);
+    /* the root's bounds on this axis, read as floats (every fourth one) */
+    const __global float *lo = (const __global float *)(sel_lo + root.x) + axis;
+    const __global float *hi = (const __global float *)(sel_hi + root.x) + axis;
     ulong below = 0, above = 0;
     for (int k = 0; k < root.y; ++k) {
-        int s = KdBuild_sides(Axis_of(sel_lo[root.x + k], axis),
-                              Axis_of(sel_hi[root.x + k], axis), plane, side == 0);
-        if (s & 1) below |= 1UL << k;
-        if (s & 2) above |= 1UL << k;
+        int s = KdBuild_sides(lo[4 * k], hi[4 * k], plane, side == 0);
+        below |= (ulong)(s & 1) << k;
+        above |= (ulong)(s >> 1) << k;
     }
     cand[c] = (ulong2)(below, above);
+}
+
+/* The plane of candidate c (6 per element: low and high face on each axis)
+ * of element e, read as one float of its bounds. */
+inline float KdBuild_plane(const __global float4 *sel_lo, const __global float4 *sel_hi, int e, int c) {
+    const __global float *face = (const __global float *)((c & 1) ? sel_hi : sel_lo);
+    return face[4 * e + ((c % 6) >> 1)];
 }
 
 /* SAH cost of candidate c (of the small root's element k) for a node with
@@ -500,7 +542,7 @@ inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
                              const __global ulong2 *cand, float *best_cost,
                              int *best_cand) {
     int axis = (c % 6) >> 1;
-    float plane = Axis_of((c & 1) ? sel_hi[root.x + k] : sel_lo[root.x + k], axis);
+    float plane = KdBuild_plane(sel_lo, sel_hi, root.x + k, c);
     if (!(Axis_of(lo, axis) < plane && plane < Axis_of(hi, axis))) return;
     ulong2 m = cand[6 * root.x + c];
     float below = (float)popcount(m.x & mask);
@@ -621,7 +663,7 @@ __kernel void KdBuild_small_emit(
     }
     int split = (int)(r & 0xffffffffL);
     int k = c / 6, axis = (c % 6) >> 1;
-    float plane = Axis_of((c & 1) ? sel_hi[root.x + k] : sel_lo[root.x + k], axis);
+    float plane = KdBuild_plane(sel_lo, sel_hi, root.x + k, c);
     ulong2 m = cand[6 * root.x + c];
     int left = rec_base + 2 * split;
     float4 lo = rec_lo[node.y], hi = rec_hi[node.y];

@@ -3,7 +3,8 @@
 The host launches the kernels of one level at a time and reads back only
 counts (scan totals) to size the next level's arrays:
 
-* large-node stage: chunk bounds, node bounds, empty-space cut or spatial
+* large-node stage: chunk bounds (a work-item per chunk on a CPU, a
+  work-group per chunk elsewhere), node bounds, empty-space cut or spatial
   median split, triangles clipped to the children, counts and compaction
   by prefix sums; children with at most ``SMALL`` triangles become small
   roots; a larger child becomes a leaf after more than ``BAD_SPLITS``
@@ -79,6 +80,8 @@ class _Config:
         if sah_lanes is None:
             sah_lanes = 1 if device.is_cpu else self.sah_group
         self.sah_lanes = min(sah_lanes, self.sah_group)
+        # a CPU bounds each chunk in one work-item, other devices in a group
+        self.serial_chunks = device.is_cpu
         self.defines = {
             "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
             "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
@@ -188,9 +191,12 @@ class _Build:
         chunk_lo, chunk_hi = dev.array(chunks, cltypes.float4), dev.array(chunks, cltypes.float4)
         el_node = dev.array(elements, np.int32)
         self.kernel("KdBuild_chunk_nodes")(active, self.act_info.data, chunk_base.data, i32(active), chunk_node.data)
-        self.kernel("KdBuild_chunk_bounds").groups(
-            chunks, self.config.chunk_group, self.act_info.data, chunk_base.data, chunk_node.data, self.el_lo.data,
-            self.el_hi.data, el_node.data, chunk_lo.data, chunk_hi.data)
+        bounds_args = (self.act_info.data, chunk_base.data, chunk_node.data, self.el_lo.data, self.el_hi.data,
+                       el_node.data, chunk_lo.data, chunk_hi.data)
+        if self.config.serial_chunks:
+            self.kernel("KdBuild_chunk_bounds_serial")(chunks, *bounds_args, i32(chunks))
+        else:
+            self.kernel("KdBuild_chunk_bounds").groups(chunks, self.config.chunk_group, *bounds_args)
         # each node's plane, each element's sides and clipped boxes
         node_split, node_mode = dev.array(active, np.float32), dev.array(active, np.int32)
         self.kernel("KdBuild_large_split")(
