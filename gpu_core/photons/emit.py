@@ -75,7 +75,9 @@ def reweight_scales(traced: list[Emitter], traced_lights: np.ndarray, emitters: 
     ``traced_lights``), the rgb factor that gives them the power of
     ``emitters`` (light table ``lights``) — or None when the photons' paths
     would differ: another set of emitters, a light moved, turned or
-    reshaped, a light row added or removed, or a channel lit that was dark."""
+    reshaped, a light row added or removed, or a channel lit that was dark;
+    or when a factor leaves float range (a light made 1e40 times brighter:
+    a fresh trace carries that power without overflow)."""
     if len(traced) != len(emitters) or len(traced_lights) != len(lights):
         return None
     for name in _PATH_FIELDS:
@@ -88,9 +90,15 @@ def reweight_scales(traced: list[Emitter], traced_lights: np.ndarray, emitters: 
         before, after = np.asarray(old.carried, np.float64), np.asarray(new.carried, np.float64)
         if ((before <= 0) & (after > 0)).any():
             return None
-        scales[i, :3] = np.where(before > 0, after / np.where(before > 0, before, 1.0), 0.0)
+        factor = np.where(before > 0, after / np.where(before > 0, before, 1.0), 0.0)
+        if not (np.isfinite(factor).all() and factor.max() <= _LARGEST_SCALE):
+            return None
+        scales[i, :3] = factor
     return scales
 
+
+# the largest reweighting factor: photon powers scaled past it could leave float range
+_LARGEST_SCALE = 1e20
 
 MAPS = ("global", "caustic")
 

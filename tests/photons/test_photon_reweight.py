@@ -99,6 +99,13 @@ def test_a_change_of_the_photons_paths_is_not_reweighted(change):
     assert reweight_scales(emitter_powers(before, t0), t0.lights, emitter_powers(after, t1), t1.lights) is None
 
 
+def test_a_light_made_enormously_brighter_is_traced_again_not_scaled_out_of_range():
+    before = validate(lit_scene([(1e-20, 1e-20, 1e-20)]))
+    after = validate(lit_scene([(1e20, 1e20, 1e20)]))
+    t0, t1 = scene_tables(before), scene_tables(after)
+    assert reweight_scales(emitter_powers(before, t0), t0.lights, emitter_powers(after, t1), t1.lights) is None
+
+
 def test_a_light_turned_dark_in_a_channel_is_reweighted_to_zero_there():
     before = validate(lit_scene([(100, 100, 100), (50, 50, 50)]))
     after = validate(lit_scene([(100, 0, 100), (50, 50, 50)]))
