@@ -214,8 +214,8 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
         features.append("path_traced_indirect")
     if scene.has_textures():
         features.append("textures")
-        if scene.has_tangents():
-            features.append("corner_tangents")
+    if scene.has_tangents():
+        features.append("corner_tangents")
     if len(tables.emit_tris):
         features.append("mesh_lights")
     if scene.has_alpha():

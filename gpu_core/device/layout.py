@@ -92,7 +92,9 @@ MATERIAL = Struct("Material", "a material row (shading/bsdf.h)", [
     ("mix_scale", "float", "what the BSDF and pass-through are scaled by: weight / chance of the pick"),
     ("mix_texture", "int", "a Mix Shader's Fac texture: mix_stop = 1 - its value, -1 for none"),
     ("mix_channel", "int", "its channel, as roughness_channel"),
-    ("pad", "int", "", 3),
+    ("aniso_x", "float", "the metal and specular lobes' alpha along the tangent over roughness^2 (1: isotropic)"),
+    ("aniso_y", "float", "and along the bitangent"),
+    ("aniso_rotation", "float", "the tangent turned about the normal, in turns"),
 ])
 
 LIGHT = Struct("Light", "a light row; derived values are computed on the host in float64", [

@@ -59,6 +59,11 @@ class Materials:
     specular_ior_level: np.ndarray  # (M,) float32: 0 no dielectric layer, 0.5 F0 of the IOR, 1 twice that
     specular_tint: np.ndarray  # (M, 3) float32: tints F0 of the dielectric layers, F82 of the metal
     shader: np.ndarray  # (M,) int32: MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS
+    # (M,) float32: Principled's Anisotropic (0..1) or the Glossy node's
+    # Anisotropy (-1..1), stretching the metal and specular lobes along the
+    # corner tangents (Scene.tangents; a triangle's UV direction without)
+    anisotropy: np.ndarray
+    anisotropic_rotation: np.ndarray  # (M,) float32, in turns about the normal
     names: list[str] = field(default_factory=list)
 
     @staticmethod
@@ -87,6 +92,8 @@ class Materials:
             specular_ior_level=0.0,
             specular_tint=(1.0, 1.0, 1.0),
             shader=MATERIAL_PRINCIPLED,
+            anisotropy=0.0,
+            anisotropic_rotation=0.0,
             name="",
         )
         rows = [{**defaults, **row} for row in rows] or [dict(defaults, name="default")]
@@ -312,8 +319,10 @@ class Scene:
         return low, high
 
     def has_tangents(self) -> bool:
-        """Whether corner tangents are given and a triangle's material has a normal map."""
-        return len(self.tangents) > 0 and bool((self.materials.normal_texture[self.used_materials()] >= 0).any())
+        """Whether corner tangents are given and a triangle's material reads
+        them: a normal map, or anisotropy."""
+        used, m = self.used_materials(), self.materials
+        return len(self.tangents) > 0 and bool(((m.normal_texture[used] >= 0) | (m.anisotropy[used] != 0)).any())
 
     def has_textures(self) -> bool:
         """Whether a triangle's material reads a texture."""

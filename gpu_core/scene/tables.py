@@ -73,7 +73,7 @@ def scene_defines(scene: Scene) -> dict:
     those it has (textures, see-through surfaces, mixes of surfaces, corner
     tangents for normal maps)."""
     has = {"SCENE_HAS_TEXTURES": scene.has_textures(), "SCENE_HAS_ALPHA": scene.has_alpha(),
-           "SCENE_HAS_MIX": scene.has_mix(), "SCENE_HAS_TANGENTS": scene.has_textures() and scene.has_tangents()}
+           "SCENE_HAS_MIX": scene.has_mix(), "SCENE_HAS_TANGENTS": scene.has_tangents()}
     return {define: 1 for define, wanted in has.items() if wanted}
 
 
@@ -104,6 +104,8 @@ def material_table(scene: Scene) -> np.ndarray:
     table["mix_scale"] = np.clip(np.nan_to_num(m.mix_scale, nan=1.0), 0.0, 1e3)
     table["mix_texture"] = np.where(table["mix_next"] >= 0, _texture_index(m.mix_texture, scene), -1)
     table["mix_channel"] = np.clip(m.mix_channel, 0, TEXTURE_LUMINANCE)
+    table["aniso_x"], table["aniso_y"] = anisotropic_scales(shader, m.anisotropy)
+    table["aniso_rotation"] = np.nan_to_num(m.anisotropic_rotation) % 1.0
     level = np.where(shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.specular_ior_level), 0.0, 1e3), 0.0)
     tint = np.clip(np.nan_to_num(m.specular_tint, nan=1.0), 0.0, 1e3)
     table["specular_tint"][:, :3] = tint
@@ -112,6 +114,20 @@ def material_table(scene: Scene) -> np.ndarray:
         table["specular_tint"][row, 3] = eta
         table["specular_fss"][row, :3] = fss
     return table
+
+
+def anisotropic_scales(shader: np.ndarray, anisotropy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """alpha_x and alpha_y over roughness^2, as Cycles stretches its lobes:
+    Principled (Anisotropic a in 0..1) by the aspect sqrt(1 - 0.9 a), x
+    over it and y times it; the Glossy node (Anisotropy a in -0.99..0.99)
+    by 1 - a and its reciprocal (x the shorter for a > 0); glass none. The
+    product stays 1: the lobes' albedo tables read roughness^2 as before."""
+    a = np.nan_to_num(np.asarray(anisotropy, np.float64))
+    principled = np.sqrt(1.0 - 0.9 * np.clip(a, 0.0, 1.0))
+    glossy = np.clip(a, -0.99, 0.99)
+    glossy_x = np.where(glossy < 0.0, 1.0 / (1.0 + glossy), 1.0 - glossy)
+    x = np.where(shader == MATERIAL_PRINCIPLED, 1.0 / principled, np.where(shader == MATERIAL_GLOSSY, glossy_x, 1.0))
+    return x.astype(np.float32), (1.0 / x).astype(np.float32)
 
 
 def _texture_index(ids: np.ndarray, scene: Scene) -> np.ndarray:

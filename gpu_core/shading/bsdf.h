@@ -46,6 +46,8 @@ typedef struct {
                              direction would go below the surface (Cycles' valid specular reflection) */
     float3 gwo;           /* the view in the glossy frame */
     bool split;           /* the glossy frame is not the shading frame */
+    bool aniso;           /* metal and specular lobes stretched: alpha ax along gt, ay along gb */
+    float ax, ay;
     float3 smooth;        /* local: the normal before a normal map, on the viewer's side */
     bool mapped;          /* a normal map moved the shading normal off the smooth one */
     float rough, alpha2;
@@ -123,14 +125,19 @@ inline float Bsdf_reflect_probability(float3 r, float3 t) {
 
 /* The BSDF of material m (base: its colour, texture applied) seen from
  * direction wo_world (towards the viewer) at a surface with shading normal
- * ns, the normal before a normal map `smooth` (ns without one) and
- * geometric normal ng (all on the viewer's side); `entering`: the viewer is
- * outside the object (by the wound normal). `sample`: the lobes sampling
- * may choose (BSDF_SAMPLE_*). */
+ * ns, the normal before a normal map `smooth` (ns without one), geometric
+ * normal ng (all on the viewer's side) and tangent (world; zero: none,
+ * the lobes stay isotropic); `entering`: the viewer is outside the object
+ * (by the wound normal). `sample`: the lobes sampling may choose
+ * (BSDF_SAMPLE_*). */
 inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns, float3 smooth, float3 ng,
-                      bool entering, int sample) {
+                      float3 tangent, bool entering, int sample) {
     Bsdf f;
     f.sample = sample;
+    f.rough = clamp(m->roughness, 0.0f, 1.0f);
+    float alpha = f.rough * f.rough;
+    f.alpha2 = alpha * alpha;
+    f.singular = f.alpha2 <= MICROFACET_SINGULAR_ALPHA2;
     /* the diffuse lobe keeps the shading normal even where it faces away
      * from the viewer (as Cycles does); the glossy lobes get theirs */
     f.n = ns;
@@ -138,20 +145,30 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     f.wo = Bsdf_to_local(&f, wo_world);
     f.wo.z = fmax(f.wo.z, 1e-6f);
     f.gn = Bsdf_glossy_normal(ng, wo_world, ns);
-    f.split = dot(f.gn, ns) < 1.0f - 1e-6f;
+    /* an anisotropic material turns the glossy frame to its tangent, itself
+     * turned about the normal by the rotation (as Cycles) */
+    f.aniso = !f.singular && m->aniso_x != m->aniso_y && dot(tangent, tangent) > 0.0f;
+    if (f.aniso) {
+        float turn = 2.0f * PI_F * m->aniso_rotation, c = cos(turn), s = sin(turn);
+        float3 along = tangent * c + cross(ns, tangent) * s + ns * dot(ns, tangent) * (1.0f - c);
+        float3 b = cross(f.gn, along);
+        float bl = length(b);
+        f.aniso = bl > 1e-6f;
+        f.gb = b / bl;
+        f.gt = cross(f.gb, f.gn);
+    }
+    f.ax = alpha * (f.aniso ? m->aniso_x : 1.0f);
+    f.ay = alpha * (f.aniso ? m->aniso_y : 1.0f);
+    f.split = f.aniso || dot(f.gn, ns) < 1.0f - 1e-6f;
     f.gwo = f.wo;
     if (f.split) {
-        Sampling_frame(f.gn, &f.gt, &f.gb);
+        if (!f.aniso) Sampling_frame(f.gn, &f.gt, &f.gb);
         f.gwo = (float3)(dot(wo_world, f.gt), dot(wo_world, f.gb), fmax(dot(wo_world, f.gn), 1e-6f));
     }
     f.ng = Bsdf_to_local(&f, ng);
     f.smooth = Bsdf_to_local(&f, smooth);
     f.mapped = dot(ns, smooth) < 1.0f - 1e-6f;
     float mu = f.gwo.z; /* the glossy lobes' view angle */
-    f.rough = clamp(m->roughness, 0.0f, 1.0f);
-    float alpha = f.rough * f.rough;
-    f.alpha2 = alpha * alpha;
-    f.singular = f.alpha2 <= MICROFACET_SINGULAR_ALPHA2;
     float metallic = clamp(m->metallic, 0.0f, 1.0f), transmission = clamp(m->transmission, 0.0f, 1.0f);
     float3 c = fmax(base, (float3)(0.0f)), cc = fmin(c, (float3)(1.0f));
     float3 tint = fmax(m->specular_tint.xyz, (float3)(0.0f));
@@ -257,16 +274,19 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
     float3 wo = f->gwo, gwi = Bsdf_to_glossy(f, wi), gn = Bsdf_from_glossy(f, up);
     if (below != (gwi.z < 0.0f) || gwi.z == 0.0f) return none;
     if (!below) {
-        float lobe_pdf;
-        float v = Microfacet_reflect_eval(f->alpha2, wo, gwi, &lobe_pdf);
+        /* glass is isotropic; metal and specular stretched where anisotropic */
+        float lobe_pdf = 0.0f, v = 0.0f, an_pdf = 0.0f, an_v;
+        if (!f->aniso || f->w_glass > 0.0f) v = Microfacet_reflect_eval(f->alpha2, wo, gwi, &lobe_pdf);
+        an_v = f->aniso ? Microfacet_reflect_eval_aniso(f->ax, f->ay, wo, gwi, &an_pdf) : v;
+        an_pdf = f->aniso ? an_pdf : lobe_pdf;
         float cos_h = dot(wo, normalize(wo + gwi));
         if (f->w_specular > 0.0f) {
-            glossy += f->w_specular * v * f->spec_ms * Microfacet_fresnel_remap(f->spec_f0, cos_h, f->spec_eta);
-            *pdf += f->q[BSDF_SPECULAR] * lobe_pdf;
+            glossy += f->w_specular * an_v * f->spec_ms * Microfacet_fresnel_remap(f->spec_f0, cos_h, f->spec_eta);
+            *pdf += f->q[BSDF_SPECULAR] * an_pdf;
         }
         if (f->w_metal > 0.0f) {
-            glossy += f->w_metal * v * f->metal_ms * Bsdf_metal_fresnel(f, cos_h);
-            *pdf += f->q[BSDF_METAL] * lobe_pdf;
+            glossy += f->w_metal * an_v * f->metal_ms * Bsdf_metal_fresnel(f, cos_h);
+            *pdf += f->q[BSDF_METAL] * an_pdf;
         }
         if (f->w_glass > 0.0f) {
             float3 r, t;
@@ -303,7 +323,10 @@ inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3
         *wi = (float3)(d.x, d.y, sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y)));
         label = BSDF_LABEL_DIFFUSE;
     } else {
-        float3 h = f->singular ? (float3)(0.0f, 0.0f, 1.0f) : Microfacet_sample_vndf(wo, sqrt(f->alpha2), u1, u2);
+        bool stretched = f->aniso && lobe != BSDF_GLASS;
+        float3 h = f->singular ? (float3)(0.0f, 0.0f, 1.0f)
+                               : Microfacet_sample_vndf(wo, stretched ? f->ax : f->rough * f->rough,
+                                                        stretched ? f->ay : f->rough * f->rough, u1, u2);
         float cos_h = dot(wo, h);
         if (!(cos_h > 0.0f)) return 0;
         bool refract = false;

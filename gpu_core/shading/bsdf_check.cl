@@ -5,12 +5,13 @@
 #include "shading/bsdf.h"
 
 /* The BSDF of material m (base colour its own) seen from wo (wo.z > 0) on
- * a surface of geometric normal +z and smooth shading normal ns (ns.z > 0). */
+ * a surface of geometric normal +z, smooth shading normal ns (ns.z > 0)
+ * and tangent +x. */
 inline Bsdf BsdfCheck_make(const __global Material *m, float4 wo, float4 ns, int entering, int sample) {
     Material mat = *m;
     float3 n = normalize(ns.xyz);
-    return Bsdf_make(&mat, mat.base_color.xyz, normalize(wo.xyz), n, n, (float3)(0.0f, 0.0f, 1.0f), entering != 0,
-                     sample);
+    return Bsdf_make(&mat, mat.base_color.xyz, normalize(wo.xyz), n, n, (float3)(0.0f, 0.0f, 1.0f),
+                     (float3)(1.0f, 0.0f, 0.0f), entering != 0, sample);
 }
 
 /* One sample per work item: direction (w = label), weight (w = pdf). */

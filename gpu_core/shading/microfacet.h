@@ -23,9 +23,23 @@ inline float Microfacet_lambda(float alpha2, float cos_n) {
     return 0.5f * (sqrt(1.0f + alpha2 * fmax(1.0f / c2 - 1.0f, 0.0f)) - 1.0f);
 }
 
-/* A visible normal for the view wo (wo.z > 0), u in [0, 1)^2. */
-inline float3 Microfacet_sample_vndf(float3 wo, float alpha, float u1, float u2) {
-    float3 vh = normalize((float3)(alpha * wo.x, alpha * wo.y, wo.z));
+/* Anisotropic GGX, alpha ax along local x and ay along y: the
+ * distribution and Smith's Lambda (equal to the above where ax = ay). */
+inline float Microfacet_D_aniso(float ax, float ay, float3 h) {
+    float3 s = (float3)(h.x / ax, h.y / ay, h.z);
+    float l = dot(s, s);
+    return 1.0f / (PI_F * ax * ay * fmax(l * l, 1e-30f));
+}
+
+inline float Microfacet_lambda_aniso(float ax, float ay, float3 v) {
+    float z2 = fmax(v.z * v.z, 1e-30f);
+    return 0.5f * (sqrt(1.0f + (ax * ax * v.x * v.x + ay * ay * v.y * v.y) / z2) - 1.0f);
+}
+
+/* A visible normal for the view wo (wo.z > 0), u in [0, 1)^2, of the
+ * distribution with alpha ax along x and ay along y. */
+inline float3 Microfacet_sample_vndf(float3 wo, float ax, float ay, float u1, float u2) {
+    float3 vh = normalize((float3)(ax * wo.x, ay * wo.y, wo.z));
     float lensq = vh.x * vh.x + vh.y * vh.y;
     float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
     float3 t2 = cross(vh, t1);
@@ -34,7 +48,7 @@ inline float3 Microfacet_sample_vndf(float3 wo, float alpha, float u1, float u2)
     float s = 0.5f * (1.0f + vh.z);
     b = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - a * a)) + s * b;
     float3 nh = a * t1 + b * t2 + sqrt(fmax(0.0f, 1.0f - a * a - b * b)) * vh;
-    float3 ne = (float3)(alpha * nh.x, alpha * nh.y, fmax(nh.z, 0.0f));
+    float3 ne = (float3)(ax * nh.x, ay * nh.y, fmax(nh.z, 0.0f));
     float len = length(ne);
     return len > 0.0f ? ne / len : (float3)(0.0f, 0.0f, 1.0f);
 }
@@ -145,6 +159,16 @@ inline float Microfacet_reflect_eval(float alpha2, float3 wo, float3 wi, float *
     float3 h = normalize(wo + wi);
     float d = Microfacet_D(alpha2, h.z);
     float lo = Microfacet_lambda(alpha2, wo.z), li = Microfacet_lambda(alpha2, wi.z);
+    float common = d / (4.0f * wo.z);
+    *pdf = common / (1.0f + lo);
+    return common / (1.0f + lo + li);
+}
+
+/* The same for the anisotropic distribution. */
+inline float Microfacet_reflect_eval_aniso(float ax, float ay, float3 wo, float3 wi, float *pdf) {
+    float3 h = normalize(wo + wi);
+    float d = Microfacet_D_aniso(ax, ay, h);
+    float lo = Microfacet_lambda_aniso(ax, ay, wo), li = Microfacet_lambda_aniso(ax, ay, wi);
     float common = d / (4.0f * wo.z);
     *pdf = common / (1.0f + lo);
     return common / (1.0f + lo + li);

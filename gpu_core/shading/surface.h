@@ -16,6 +16,7 @@ typedef struct {
     float3 ng_raw; /* geometric normal as wound */
     float2 uv;
     float2 bary;   /* barycentric weights of the hit's second and third corners */
+    float3 tangent; /* an anisotropic material's tangent (world), zero otherwise */
     int tri;
     float eps;     /* offset for rays leaving this point */
 } SurfacePoint;
@@ -57,6 +58,7 @@ inline SurfacePoint Surface_at(const SceneView *sc, float3 dir, const Hit *hit) 
     s.smooth = s.ns;
     s.uv = Surface_uv(sc, hit);
     s.bary = (float2)(hit->u, hit->v);
+    s.tangent = (float3)(0.0f);
     s.tri = t;
     /* p is rounded like the largest vertex coordinate it was made from */
     s.eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
@@ -166,10 +168,15 @@ inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, 
 
 /* The material at the point with its textures applied: Base Color times
  * its texture (the return value), Roughness and Metallic from theirs (in
- * m), the normal map's shading normal (in sp). Without textures in the
- * scene, the material's values. */
+ * m), the normal map's shading normal (in sp), and an anisotropic
+ * material's tangent (in sp). Without textures in the scene, the
+ * material's values. */
 inline float3 Surface_textured(const SceneView *sc, Material *m, SurfacePoint *sp) {
     float3 base = m->base_color.xyz;
+    if (m->aniso_x != m->aniso_y) {
+        float facing = dot(sp->ng_raw, sp->ng) > 0.0f ? 1.0f : -1.0f;
+        sp->tangent = Surface_tangent(sc, sp, facing * sp->ns).xyz;
+    }
 #ifdef SCENE_HAS_TEXTURES
     if (m->texture >= 0) base *= Texture_sample(sc->atlas, sc->textures, m->texture, sp->uv).xyz;
     if (m->roughness_texture >= 0)
@@ -190,7 +197,7 @@ inline float3 Surface_textured(const SceneView *sc, Material *m, SurfacePoint *s
 inline Bsdf Surface_bsdf(const SurfacePoint *sp, const Material *m, float3 base, float3 dir, int sample) {
     /* the wound normal facing the ray means entering the object */
     bool entering = dot(sp->ng_raw, sp->ng) > 0.0f;
-    return Bsdf_make(m, base, -dir, sp->ns, sp->smooth, sp->ng, entering, sample);
+    return Bsdf_make(m, base, -dir, sp->ns, sp->smooth, sp->ng, sp->tangent, entering, sample);
 }
 
 /* Where a ray leaving sp along the world direction dir starts: above the
