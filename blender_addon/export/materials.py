@@ -29,8 +29,9 @@ _SRGB_SPACES = ("sRGB", "sRGB EOTF")
 _SEPARATE_NODES = ("ShaderNodeSeparateColor", "ShaderNodeSeparateRGB")
 _SEPARATE_CHANNELS = {"Red": 0, "Green": 1, "Blue": 2, "R": 0, "G": 1, "B": 2}
 # Principled layers the renderer has no model for, with the input that switches them on
-_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
-                           ("Anisotropic", "anisotropy"))
+_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"))
+# the tangent an anisotropic shader reads with its Tangent input unlinked, as Cycles: radial about Z
+DEFAULT_TANGENT = ("RADIAL", "Z")
 
 
 @dataclass
@@ -89,19 +90,26 @@ class MaterialTable:
         for i, (slot, row) in enumerate(zip(slots, rows)):
             self.rows[slot] = {**row, "mix_next": slots[i + 1] if i + 1 < len(slots) else -1}
 
-    def uses_normal_map(self, rows) -> bool:
-        """Whether a material of ``rows`` (table rows, their mixes
-        followed) bends normals by a normal map: its meshes need tangents."""
-        todo, seen = [int(r) for r in rows], set()
+    def tangents_of(self, rows) -> dict:
+        """The tangents the materials of ``rows`` (table rows, their mixes
+        followed) read, by row: "UV" where a normal map bends the normal or
+        the anisotropy follows a UV map (MikkTSpace's, the normal map's
+        winning where a row has both), ("RADIAL", axis) where it follows an
+        axis of the object's texture space; rows reading none are left out."""
+        todo, seen, out = [int(r) for r in rows], set(), {}
         while todo:
             row = todo.pop()
             if row in seen or not 0 <= row < len(self.rows):
                 continue
             seen.add(row)
-            if self.rows[row].get("normal_texture", -1) >= 0:
-                return True
-            todo.append(self.rows[row].get("mix_next", -1))
-        return False
+            fields = self.rows[row]
+            tangent = fields.get("tangent")
+            if fields.get("normal_texture", -1) >= 0 or (tangent is not None and tangent[0] == "UV"):
+                out[row] = "UV"
+            elif tangent is not None:
+                out[row] = tangent
+            todo.append(fields.get("mix_next", -1))
+        return out
 
     def forget(self, name: str) -> None:
         """Export the material ``name`` again at its next use (it was edited);
@@ -165,15 +173,13 @@ class MaterialTable:
         if kind == "ShaderNodeBsdfDiffuse":
             return {**self._color(name, node.inputs["Color"]), "roughness": 1.0, **self._normal(name, node)}
         if kind in _GLOSSY:
-            anisotropy = node.inputs.get("Anisotropy")
-            if anisotropy is not None and (anisotropy.is_linked or anisotropy.default_value != 0.0):
-                self._warn(f"material '{name}': anisotropy on {node.name} is not supported; rendered isotropic")
             return {
                 **self._color(name, node.inputs["Color"]),
                 "shader": MATERIAL_GLOSSY,
                 "metallic": 1.0,
                 **self._texture_value(name, node.inputs["Roughness"], "roughness"),
                 **self._normal(name, node),
+                **self._anisotropy(name, node, "Anisotropy", "Rotation"),
             }
         if kind == "ShaderNodeBsdfGlass":
             return {
@@ -209,7 +215,36 @@ class MaterialTable:
             "specular_tint": tuple(self._color_value(name, inputs["Specular Tint"])),
             "alpha": self._value(name, inputs["Alpha"]),
             "emission": tuple(float(c) for c in emission),
+            **self._anisotropy(name, node, "Anisotropic", "Anisotropic Rotation"),
         }
+
+    def _anisotropy(self, name: str, node, amount: str, rotation: str) -> dict:
+        """Row fields of a shader's anisotropy (its ``amount`` and
+        ``rotation`` sockets) and the tangent it is read along (the row's
+        "tangent": ("RADIAL", axis) about an axis of the object's texture
+        space, or ("UV", map): the map's MikkTSpace tangents)."""
+        socket = node.inputs.get(amount)
+        if socket is None:
+            return {}
+        value = self._value(name, socket)
+        if value == 0.0:
+            return {}
+        fields = {"anisotropy": value, "anisotropic_rotation": self._value(name, node.inputs[rotation])}
+        source = _linked_node(node.inputs["Tangent"]) if "Tangent" in node.inputs else None
+        mapped = _linked_node(node.inputs["Normal"]) if "Normal" in node.inputs else None
+        if mapped is not None and mapped.bl_idname == "ShaderNodeNormalMap" and not (
+                source is not None and source.bl_idname == "ShaderNodeTangent" and source.direction_type == "UV_MAP"):
+            self._warn(f"material '{name}': the anisotropy of {node.name} follows its normal map's UV tangents, "
+                       "not the radial one")
+        if source is None:
+            return {**fields, "tangent": DEFAULT_TANGENT}
+        if source.bl_idname == "ShaderNodeTangent":
+            if source.direction_type == "UV_MAP":
+                return {**fields, "tangent": ("UV", source.uv_map)}
+            return {**fields, "tangent": ("RADIAL", source.axis)}
+        self._warn(f"material '{name}': '{source.bl_idname}' on {node.name} > Tangent is not supported; "
+                   "used the radial tangent about Z")
+        return {**fields, "tangent": DEFAULT_TANGENT}
 
     def _combine(self, name: str, node) -> Surface:
         """Add/Mix Shader: the surfaces of both inputs, weighted (1 each, or

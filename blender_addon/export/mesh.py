@@ -6,7 +6,7 @@ runs over vertices, corners or triangles.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +26,9 @@ class LocalMesh:
     # w the bitangent's sign; None when not asked for or not computable
     tangents: np.ndarray | None = None
     tangents_asked: bool = False
+    # (2, 3): the texture space's centre and half size (generated coordinates
+    # run from centre - size to centre + size)
+    texspace: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]))
 
 
 class MeshCache:
@@ -93,6 +96,7 @@ def _triangulate(obj, tangents: bool = False) -> LocalMesh | None:
             materials=list(mesh.materials),
             tangents=_corner_tangents(mesh, uv_layer, tri_loops) if tangents else None,
             tangents_asked=tangents,
+            texspace=np.array([mesh.texspace_location[:], mesh.texspace_size[:]], np.float64),
         )
     finally:
         obj.to_mesh_clear()
@@ -122,6 +126,27 @@ def _render_uv_layer(mesh):
         if layer.active_render:
             return layer
     return mesh.uv_layers.active
+
+
+def radial_tangents(local: LocalMesh, matrix, axis: str) -> np.ndarray:
+    """(T, 3, 4) unit world tangents about ``axis`` ("X", "Y" or "Z") of the
+    object's texture space at each corner, w = 1, as Cycles' Tangent node in
+    Radial mode (the default of an anisotropic shader): the generated
+    coordinate g in 0..1 turned a quarter about the axis through 0.5, then
+    by the object's normal matrix (corner order as transform() gives it)."""
+    centre, size = local.texspace
+    g = (local.positions.astype(np.float64) - centre) / np.where(size != 0.0, size, 1.0) * 0.5
+    x, y, z = g[..., 0], g[..., 1], g[..., 2]
+    zero = np.zeros_like(x)
+    t = {"X": (zero, -z, y), "Y": (-z, zero, x)}.get(axis, (-y, x, zero))
+    t = np.stack(t, axis=-1)
+    m = np.asarray(matrix, np.float64)[:3, :3]
+    det = np.linalg.det(m)
+    t = t @ (np.linalg.inv(m).T if abs(det) > 1e-300 else m).T
+    length = np.linalg.norm(t, axis=-1, keepdims=True)
+    t = np.where(length > 0, t / np.where(length > 0, length, 1.0), 0.0)
+    rows = np.concatenate([t, np.ones(t.shape[:-1] + (1,))], axis=-1).astype(np.float32)
+    return np.ascontiguousarray(rows[:, ::-1] if det < 0 else rows)
 
 
 def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:

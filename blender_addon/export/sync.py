@@ -26,7 +26,7 @@ from gpu_core.scene import Lights, Materials, Scene
 
 from .lights import light_row
 from .materials import MaterialTable
-from .mesh import GEOMETRY_TYPES, LocalMesh, MeshCache, transform
+from .mesh import GEOMETRY_TYPES, LocalMesh, MeshCache, radial_tangents, transform
 from .world import world_radiance
 
 # object types that never render anything by themselves
@@ -72,6 +72,7 @@ class _Instance:
     local: LocalMesh
     matrix: bytes
     slot_rows: bytes
+    tangent_kinds: dict  # material row -> the tangent it reads (MaterialTable.tangents_of)
     world: np.ndarray
     normals: np.ndarray
     uvs: np.ndarray
@@ -145,10 +146,11 @@ class SceneSync:
                 _warn_object_settings(obj, warnings)
             key = _instance_key(inst)
             slot_rows = _slot_rows(obj, local.materials, table)
-            if table.uses_normal_map(slot_rows) and not local.tangents_asked:
+            tangents = table.tangents_of(slot_rows)
+            if "UV" in tangents.values() and not local.tangents_asked:
                 local = self._meshes.local_mesh(obj, tangents=True)
                 slot_rows = _slot_rows(obj, local.materials, table)
-            instances[key] = self._instance(key, inst, local, slot_rows)
+            instances[key] = self._instance(key, inst, local, slot_rows, tangents)
             order.append(key)
         warnings.extend(f"{kind} objects are not supported and were skipped" for kind in sorted(skipped_types))
         warnings.extend(table.warnings)
@@ -186,17 +188,26 @@ class SceneSync:
             self._table = MaterialTable(self._pixels)
         return self._table
 
-    def _instance(self, key: tuple, inst, local: LocalMesh, slot_rows: np.ndarray) -> _Instance:
-        """The instance's arrays: kept when its mesh, matrix and materials are the same."""
+    def _instance(self, key: tuple, inst, local: LocalMesh, slot_rows: np.ndarray, kinds: dict) -> _Instance:
+        """The instance's arrays: kept when its mesh, matrix, materials and
+        the tangents they read are the same. Corner tangents: MikkTSpace's
+        (``local``'s) on triangles whose material reads them, radial ones
+        where it reads those, zero elsewhere; none without any."""
         matrix = np.asarray(inst.matrix_world, np.float64)
         kept = self._instances.get(key)
         if (kept is not None and kept.local is local and kept.matrix == matrix.tobytes()
-                and kept.slot_rows == slot_rows.tobytes()):
+                and kept.slot_rows == slot_rows.tobytes() and kept.tangent_kinds == kinds):
             return kept
         self.stats.instances_transformed += 1
         world, normals, uvs, tangents = transform(local, matrix)
         ids = slot_rows[np.clip(local.slots, 0, len(slot_rows) - 1)]
-        return _Instance(local, matrix.tobytes(), slot_rows.tobytes(), world, normals, uvs, tangents, ids)
+        radial = {kind for kind in kinds.values() if kind != "UV"}
+        if radial:
+            tangents = np.zeros((len(ids), 3, 4), np.float32) if tangents is None else tangents.copy()
+            for kind in radial:
+                on = np.isin(ids, [row for row, k in kinds.items() if k == kind])
+                tangents[on] = radial_tangents(local, matrix, kind[1])[on]
+        return _Instance(local, matrix.tobytes(), slot_rows.tobytes(), kinds, world, normals, uvs, tangents, ids)
 
     # -- the scene ----------------------------------------------------------------
 

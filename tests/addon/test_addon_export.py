@@ -275,6 +275,34 @@ def test_meshes_under_a_normal_map_carry_mikktspace_corner_tangents(bpy):
     np.testing.assert_array_equal(scene.tangents[~on_sphere], 0.0)
 
 
+def test_anisotropic_shaders_export_their_stretch_and_the_tangent_they_follow(bpy):
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1, location=(0, 0, 0))
+    radial, node = _material(bpy, "ShaderNodeBsdfPrincipled", Anisotropic=0.7)
+    node.inputs["Anisotropic Rotation"].default_value = 0.25
+    bpy.context.object.data.materials.append(radial)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1, location=(5, 0, 0))
+    along_uv, glossy = _material(bpy, "ShaderNodeBsdfGlossy", Anisotropy=-0.4)
+    tangent = along_uv.node_tree.nodes.new("ShaderNodeTangent")
+    tangent.direction_type = "UV_MAP"
+    along_uv.node_tree.links.new(tangent.outputs["Tangent"], glossy.inputs["Tangent"])
+    bpy.context.object.data.materials.append(along_uv)
+    scene = _export(bpy)
+    m = scene.materials
+    row = m.names.index("ShaderNodeBsdfPrincipled")
+    assert m.anisotropy[row] == pytest.approx(0.7) and m.anisotropic_rotation[row] == pytest.approx(0.25)
+    assert m.anisotropy[m.names.index("ShaderNodeBsdfGlossy")] == pytest.approx(-0.4)
+    assert scene.has_tangents() and not any("anisotropy" in w for w in scene.warnings)
+    centres = scene.triangles.mean(axis=1)
+    first = centres[:, 0] < 2.5
+    # radial about the object's Z: horizontal, square to the corner's own direction from the axis
+    t, corners = scene.tangents[first, :, :3], scene.triangles[first]
+    np.testing.assert_allclose(np.linalg.norm(t, axis=-1), 1.0, atol=1e-5)
+    np.testing.assert_allclose(t[..., 2], 0.0, atol=1e-6)
+    np.testing.assert_allclose(np.einsum("tcj,tcj->tc", t[..., :2], corners[..., :2]), 0.0, atol=1e-5)
+    # the UV map's: MikkTSpace's, sign in w
+    assert set(np.unique(scene.tangents[~first, :, 3])) <= {-1.0, 1.0}
+
+
 def test_a_material_edit_that_adds_a_normal_map_gives_the_mesh_its_tangents(bpy):
     from blender_addon.export.sync import SceneSync, read_updates
 

@@ -32,6 +32,9 @@ MATERIALS = {
     **{f"specular_{level}": {"roughness": 0.4, "Specular IOR Level": level} for level in (0.0, 0.5, 1.0)},
     "glossy_node": dict(node="ShaderNodeBsdfGlossy", roughness=0.3),
     "glass_node": dict(node="ShaderNodeBsdfGlass", roughness=0.2),
+    "metal_anisotropic": {"metallic": 1.0, "roughness": 0.4, "Anisotropic": 0.8, "Anisotropic Rotation": 0.1},
+    "plastic_anisotropic": {"roughness": 0.3, "Anisotropic": 1.0},
+    "glossy_node_anisotropic": dict(node="ShaderNodeBsdfGlossy", roughness=0.4, Anisotropy=-0.5),
     "textured": dict(textured="values"),
     "normal_map": dict(textured="normals"),
     "mix": dict(mixed="ShaderNodeMixShader"),
@@ -131,7 +134,8 @@ def _material(bpy, name, spec):
     out = tree.nodes.new("ShaderNodeOutputMaterial")
     node = tree.nodes.new(node_kind)
     node.inputs["Color"].default_value = BASE
-    node.inputs["Roughness"].default_value = spec["roughness"]
+    for key, value in spec.items():
+        node.inputs["Roughness" if key == "roughness" else key].default_value = value
     tree.links.new(node.outputs[0], out.inputs["Surface"])
     return mat
 
