@@ -120,9 +120,11 @@ inline int KdBuild_chunk_range(const __global int4 *act_info, const __global int
     return node;
 }
 
-/* Bounds of each chunk's elements by a work-group reduction (one group per
- * chunk, power-of-two size up to KD_CHUNK); also tags elements with their
- * node. */
+/* Bounds of each chunk's elements; also tags elements with their node.
+ * KD_CHUNK_LANES work-items a chunk: one on a CPU (a loop, no barriers: a
+ * group of mostly idle work-items and its barriers cost more there, most
+ * chunks of the deeper levels holding a few elements), else a work-group
+ * reduction (one group per chunk, power-of-two size up to KD_CHUNK). */
 __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
                                    const __global int *chunk_base,
                                    const __global int *chunk_node,
@@ -130,9 +132,14 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
                                    const __global float4 *el_hi,
                                    __global int *el_node,
                                    __global float4 *chunk_lo,
-                                   __global float4 *chunk_hi) {
+                                   __global float4 *chunk_hi, const int chunks) {
+#if KD_CHUNK_LANES == 1
+    int c = get_global_id(0), lid = 0, size = 1;
+    if (c >= chunks) return;
+#else
     __local float4 lo_s[KD_CHUNK], hi_s[KD_CHUNK];
     int c = get_group_id(0), lid = get_local_id(0), size = get_local_size(0);
+#endif
     int begin, end;
     int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);
     float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
@@ -141,6 +148,10 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
         hi = fmax(hi, el_hi[e]);
         el_node[e] = node;
     }
+#if KD_CHUNK_LANES == 1
+    chunk_lo[c] = lo;
+    chunk_hi[c] = hi;
+#else
     lo_s[lid] = lo;
     hi_s[lid] = hi;
     barrier(CLK_LOCAL_MEM_FENCE);
@@ -155,31 +166,7 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
         chunk_lo[c] = lo_s[0];
         chunk_hi[c] = hi_s[0];
     }
-}
-
-/* The same with one work-item per chunk and no barriers (a CPU, where a
- * group of mostly idle work-items and its barriers cost more than the
- * loop: most chunks of the deeper levels hold a few elements). */
-__kernel void KdBuild_chunk_bounds_serial(const __global int4 *act_info,
-                                          const __global int *chunk_base,
-                                          const __global int *chunk_node,
-                                          const __global float4 *el_lo,
-                                          const __global float4 *el_hi,
-                                          __global int *el_node,
-                                          __global float4 *chunk_lo,
-                                          __global float4 *chunk_hi, const int chunks) {
-    int c = get_global_id(0);
-    if (c >= chunks) return;
-    int begin, end;
-    int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);
-    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
-    for (int e = begin; e < end; ++e) {
-        lo = fmin(lo, el_lo[e]);
-        hi = fmax(hi, el_hi[e]);
-        el_node[e] = node;
-    }
-    chunk_lo[c] = lo;
-    chunk_hi[c] = hi;
+#endif
 }
 
 /* Per node: its bounds from its chunks (segmented reduction, the chunks of

@@ -81,11 +81,11 @@ class _Config:
             sah_lanes = 1 if device.is_cpu else self.sah_group
         self.sah_lanes = min(sah_lanes, self.sah_group)
         # a CPU bounds each chunk in one work-item, other devices in a group
-        self.serial_chunks = device.is_cpu
+        self.chunk_lanes = 1 if device.is_cpu else self.chunk_group
         self.defines = {
             "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
             "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
-            "KD_SAH_LANES": self.sah_lanes,
+            "KD_SAH_LANES": self.sah_lanes, "KD_CHUNK_LANES": self.chunk_lanes,
         }
 
 
@@ -191,12 +191,13 @@ class _Build:
         chunk_lo, chunk_hi = dev.array(chunks, cltypes.float4), dev.array(chunks, cltypes.float4)
         el_node = dev.array(elements, np.int32)
         self.kernel("KdBuild_chunk_nodes")(active, self.act_info.data, chunk_base.data, i32(active), chunk_node.data)
+        bounds = self.kernel("KdBuild_chunk_bounds")
         bounds_args = (self.act_info.data, chunk_base.data, chunk_node.data, self.el_lo.data, self.el_hi.data,
-                       el_node.data, chunk_lo.data, chunk_hi.data)
-        if self.config.serial_chunks:
-            self.kernel("KdBuild_chunk_bounds_serial")(chunks, *bounds_args, i32(chunks))
+                       el_node.data, chunk_lo.data, chunk_hi.data, i32(chunks))
+        if self.config.chunk_lanes == 1:
+            bounds(chunks, *bounds_args)
         else:
-            self.kernel("KdBuild_chunk_bounds").groups(chunks, self.config.chunk_group, *bounds_args)
+            bounds.groups(chunks, self.config.chunk_group, *bounds_args)
         # each node's plane, each element's sides and clipped boxes
         node_split, node_mode = dev.array(active, np.float32), dev.array(active, np.int32)
         self.kernel("KdBuild_large_split")(

@@ -86,16 +86,22 @@ def fresnel_average(eta: float, n: int = 4096) -> float:
     return float(2.0 * np.mean(fresnel_dielectric(mu, eta) * mu))
 
 
-def _lobe(rough: float, mu: float, strata: int, eta: float | None = None) -> tuple[float, float]:
-    """(E, S) of one grid point: the F = 1 albedo and the Fresnel remap's
-    share of it (S = 0 without eta)."""
+def _visible_normals(rough: float, mu: float, strata: int) -> tuple:
+    """(mu, alpha, wo, h, wo . h) of strata^2 stratified visible normals
+    for the view at cos mu (kept off grazing) and roughness rough."""
     mu = max(mu, 1e-4)
     alpha = max(rough * rough, 1e-6)
     wo = np.array([np.sqrt(max(0.0, 1.0 - mu * mu)), 0.0, mu])
     g = (np.arange(strata) + 0.5) / strata
     u1, u2 = (x.ravel() for x in np.meshgrid(g, g))
     h = _vndf(wo, alpha, u1, u2)
-    cos_oh = h @ wo
+    return mu, alpha, wo, h, h @ wo
+
+
+def _lobe(rough: float, mu: float, strata: int, eta: float | None = None) -> tuple[float, float]:
+    """(E, S) of one grid point: the F = 1 albedo and the Fresnel remap's
+    share of it (S = 0 without eta)."""
+    mu, alpha, wo, h, cos_oh = _visible_normals(rough, mu, strata)
     wi = 2.0 * cos_oh[:, None] * h - wo
     valid = wi[:, 2] > 0.0
     weight = np.where(valid, (1.0 + _lambda(mu, alpha)) / (1.0 + _lambda(mu, alpha) + _lambda(wi[:, 2], alpha)), 0.0)
@@ -119,13 +125,7 @@ def _refract(wo: np.ndarray, h: np.ndarray, cos_oh: np.ndarray, eta: float) -> t
 def _glass(rough: float, mu: float, eta: float, strata: int) -> float:
     """G at one grid point: reflection with weight F, refraction with 1 - F,
     each sampled by the visible normals (weight G2 / G1)."""
-    mu = max(mu, 1e-4)
-    alpha = max(rough * rough, 1e-6)
-    wo = np.array([np.sqrt(max(0.0, 1.0 - mu * mu)), 0.0, mu])
-    g = (np.arange(strata) + 0.5) / strata
-    u1, u2 = (x.ravel() for x in np.meshgrid(g, g))
-    h = _vndf(wo, alpha, u1, u2)
-    cos_oh = h @ wo
+    mu, alpha, wo, h, cos_oh = _visible_normals(rough, mu, strata)
     lo = _lambda(mu, alpha)
     fresnel = fresnel_dielectric(cos_oh, eta)
     wr = 2.0 * cos_oh[:, None] * h - wo
