@@ -54,23 +54,23 @@ typedef struct {
 #endif
 } ImageGi;
 
-/* Fraction of light passing along a shadow ray: 0 when an opaque surface
- * blocks it; with see-through (alpha) materials in the scene, the product of
- * their transparencies. */
-inline float Image_visibility(const SceneView *sc, float3 org, float3 dir, float tmax) {
+/* Fraction of light passing along a shadow ray, per channel: 0 when an
+ * opaque surface blocks it; with see-through materials in the scene (alpha,
+ * Transparent shaders), the product of their transmittances. */
+inline float3 Image_visibility(const SceneView *sc, float3 org, float3 dir, float tmax) {
 #ifdef SCENE_HAS_ALPHA
-    float vis = 1.0f, tmin = 0.0f;
+    float3 vis = (float3)(1.0f);
+    float tmin = 0.0f;
     for (int i = 0; i < IMAGE_MAX_PASSTHROUGH; ++i) {
         Hit hit;
         if (!KdTree_intersect(&sc->tree, org, dir, tmin, tmax, &hit)) return vis;
-        float passed = Surface_transmittance(sc, hit.tri, Surface_uv(sc, &hit));
-        if (!(passed > 0.0f)) return 0.0f;
-        vis *= passed;
+        vis *= Surface_transmittance(sc, hit.tri, Surface_uv(sc, &hit));
+        if (!(vis.x > 0.0f || vis.y > 0.0f || vis.z > 0.0f)) return (float3)(0.0f);
         tmin = hit.t + Ray_offset(fmax(hit.t, Ray_magnitude(org)));
     }
-    return 0.0f;
+    return (float3)(0.0f);
 #else
-    return KdTree_occluded(&sc->tree, org, dir, 0.0f, tmax) ? 0.0f : 1.0f;
+    return (float3)(KdTree_occluded(&sc->tree, org, dir, 0.0f, tmax) ? 0.0f : 1.0f);
 #endif
 }
 
@@ -112,7 +112,7 @@ inline void Image_shadow_ray(const SceneView *sc, const Bsdf *f, float3 org, con
     float3 g = Bsdf_eval(f, Bsdf_to_local(f, ls->dir), &d, &pdf);
     if (!(d.x > 0.0f || d.y > 0.0f || d.z > 0.0f || g.x > 0.0f || g.y > 0.0f || g.z > 0.0f)) return;
     float w = ls->pdf > 0.0f ? Image_mis(ls->pdf * rate, pdf) : 1.0f;
-    float3 arriving = ls->value * (scale * w * Image_visibility(sc, org, ls->dir, ls->dist));
+    float3 arriving = ls->value * (scale * w) * Image_visibility(sc, org, ls->dir, ls->dist);
     *diffuse += d * arriving;
     *glossy += g * arriving;
 }
@@ -408,7 +408,7 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(rng) >= m.base_color.w && st.passes < IMAGE_MAX_PASSTHROUGH) {
             st.passes++;
-            st.throughput *= m.mix_scale;
+            st.throughput *= m.mix_scale * Surface_pass_tint(&m);
             /* the segment goes on from the same origin, so the lights and
              * emitters it meets are weighed from the point that scattered it */
             st.tmin = hit.t + Ray_offset(fmax(hit.t, Ray_magnitude(st.org)));

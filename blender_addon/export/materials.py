@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gpu_core.scene import MATERIAL_GLASS, MATERIAL_GLOSSY, TEXTURE_LUMINANCE
+from gpu_core.scene import MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_TRANSPARENT, TEXTURE_LUMINANCE
 
 DEFAULT_ROW = {"base_color": (0.8, 0.8, 0.8), "roughness": 0.5}
 BLACK = (0.0, 0.0, 0.0)
@@ -191,9 +191,9 @@ class MaterialTable:
                 **self._normal(name, node),
             }
         if kind == "ShaderNodeBsdfTransparent":
-            if self._color_value(name, node.inputs["Color"]) != [1.0, 1.0, 1.0]:
-                self._warn(f"material '{name}': the colour of {node.name} is not supported; passed light untinted")
-            return {"base_color": BLACK, "alpha": 0.0}
+            # everything passes, tinted by its colour
+            return {"shader": MATERIAL_TRANSPARENT, "base_color": tuple(self._color_value(name, node.inputs["Color"])),
+                    "alpha": 0.0}
         self._warn(f"material '{name}': shader node '{node.bl_idname}' is not supported; used the default material")
         return dict(DEFAULT_ROW)
 

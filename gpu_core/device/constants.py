@@ -24,10 +24,12 @@ AREA_RECTANGLE = 0
 AREA_ELLIPSE = 1
 
 # material rows' shaders (shading/bsdf.h): the Principled BSDF, or the
-# Glossy or Glass shader node alone
+# Glossy, Glass or Transparent shader node alone (a Transparent row has
+# alpha 0 and its colour tints the light passing through it)
 MATERIAL_PRINCIPLED = 0
 MATERIAL_GLOSSY = 1
 MATERIAL_GLASS = 2
+MATERIAL_TRANSPARENT = 3
 # Below this roughness a metal or glass lobe bends light into caustics: the
 # photons it scatters are caustic photons (the caustic map) and its camera
 # paths are followed as specular ones; above it, its light is glossy.

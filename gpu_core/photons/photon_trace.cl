@@ -92,7 +92,7 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
         /* stochastic alpha: pass straight through */
         if (m.base_color.w < 1.0f && Rng_next(&rng) >= m.base_color.w && passes < PHOTON_MAX_PASSTHROUGH) {
             passes++;
-            power *= m.mix_scale;
+            power *= m.mix_scale * Surface_pass_tint(&m);
             org = sp.p - sp.eps * sp.ng;
             continue;
         }

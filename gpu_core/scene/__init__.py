@@ -16,6 +16,7 @@ from ..device.constants import (
     MATERIAL_GLASS,
     MATERIAL_GLOSSY,
     MATERIAL_PRINCIPLED,
+    MATERIAL_TRANSPARENT,
     TEXTURE_LUMINANCE,
 )
 from .model import PARTS, Camera, Lights, Materials, Scene, ValidationReport, part_digests
@@ -24,5 +25,5 @@ from .validate import validate
 __all__ = [
     "AREA_ELLIPSE", "AREA_RECTANGLE", "CAMERA_ORTHO", "CAMERA_PERSP", "FILTER_BLACKMAN_HARRIS", "FILTER_BOX",
     "FILTER_GAUSSIAN", "LIGHT_AREA", "LIGHT_POINT", "LIGHT_SPOT",
-    "LIGHT_SUN", "MATERIAL_GLASS", "MATERIAL_GLOSSY", "MATERIAL_PRINCIPLED", "PARTS", "TEXTURE_LUMINANCE", "Camera", "Lights", "Materials", "Scene", "ValidationReport", "part_digests", "validate",
+    "LIGHT_SUN", "MATERIAL_GLASS", "MATERIAL_GLOSSY", "MATERIAL_PRINCIPLED", "MATERIAL_TRANSPARENT", "PARTS", "TEXTURE_LUMINANCE", "Camera", "Lights", "Materials", "Scene", "ValidationReport", "part_digests", "validate",
 ]

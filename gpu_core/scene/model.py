@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ..device.constants import (AREA_RECTANGLE, CAMERA_PERSP, CAUSTIC_ROUGHNESS, FILTER_BOX, LIGHT_POINT, LIGHT_SUN,
-                                MATERIAL_PRINCIPLED, TEXTURE_LUMINANCE)
+                                MATERIAL_PRINCIPLED, MATERIAL_TRANSPARENT, TEXTURE_LUMINANCE)
 
 
 _SINGULAR_ROUGHNESS = 2e-10 ** 0.25  # roughness of MICROFACET_SINGULAR_ALPHA2 (alpha = roughness^2)
@@ -332,8 +332,9 @@ class Scene:
         return bool(self.textures) and any(bool((ids >= 0).any()) for ids in bound)
 
     def has_alpha(self) -> bool:
-        """Whether a triangle's material is see-through."""
-        return bool((self.materials.alpha[self.used_materials()] < 1.0).any())
+        """Whether a triangle's material is see-through (Alpha, or a Transparent shader)."""
+        used, m = self.used_materials(), self.materials
+        return bool(((m.alpha[used] < 1.0) | (m.shader[used] == MATERIAL_TRANSPARENT)).any())
 
     def triangle_bounds(self) -> np.ndarray:
         """(2, 3): min and max of the triangles' corners; empty (0, 3) without triangles."""

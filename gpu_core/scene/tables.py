@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..device.constants import (AREA_ELLIPSE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_MESH, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN,
-                                MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_PRINCIPLED, TEXTURE_LUMINANCE)
+                                MATERIAL_GLASS, MATERIAL_GLOSSY, MATERIAL_PRINCIPLED, MATERIAL_TRANSPARENT,
+                                TEXTURE_LUMINANCE)
 from ..device.layout import CAMERA_DTYPE, LIGHT_DTYPE, MATERIAL_DTYPE, TEXTURE_INFO_DTYPE
 from ..shading import microfacet_tables
 from .model import PARTS, Scene
@@ -81,15 +82,18 @@ def material_table(scene: Scene) -> np.ndarray:
     m = scene.materials
     table = np.zeros(len(m), MATERIAL_DTYPE)
     table["base_color"][:, :3] = np.clip(np.nan_to_num(m.base_color), 0.0, 1.0)
-    table["base_color"][:, 3] = np.clip(np.nan_to_num(m.alpha, nan=1.0), 0.0, 1.0)
+    shader = np.where(np.isin(m.shader, (MATERIAL_GLOSSY, MATERIAL_GLASS, MATERIAL_TRANSPARENT)), m.shader,
+                      MATERIAL_PRINCIPLED)
+    # a Transparent row lets everything through, tinted by its colour
+    table["base_color"][:, 3] = np.where(shader == MATERIAL_TRANSPARENT, 0.0,
+                                         np.clip(np.nan_to_num(m.alpha, nan=1.0), 0.0, 1.0))
     table["emission"][:, :3] = emission_radiance(scene)
-    shader = np.where(np.isin(m.shader, (MATERIAL_GLOSSY, MATERIAL_GLASS)), m.shader, MATERIAL_PRINCIPLED)
     table["shader"] = shader
     # the Glossy and Glass nodes are one lobe each
     table["metallic"] = np.where(shader == MATERIAL_GLOSSY, 1.0, np.where(
-        shader == MATERIAL_GLASS, 0.0, np.clip(np.nan_to_num(m.metallic), 0.0, 1.0)))
+        shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.metallic), 0.0, 1.0), 0.0))
     table["transmission"] = np.where(shader == MATERIAL_GLASS, 1.0, np.where(
-        shader == MATERIAL_GLOSSY, 0.0, np.clip(np.nan_to_num(m.transmission), 0.0, 1.0)))
+        shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.transmission), 0.0, 1.0), 0.0))
     table["roughness"] = np.clip(np.nan_to_num(m.roughness), 0.0, 1.0)
     table["ior"] = np.clip(np.nan_to_num(m.ior, nan=1.5), 1e-3, 1e3)
     table["texture"] = _texture_index(m.texture_id, scene)

@@ -95,23 +95,30 @@ inline Material Surface_material(const SceneView *sc, int tri, float2 uv, float 
     return m;
 }
 
+/* The colour light keeps passing through a row's surface: a Transparent
+ * shader's colour, white for any other (its alpha decides how often). */
+inline float3 Surface_pass_tint(const Material *m) {
+    return m->shader == MATERIAL_TRANSPARENT ? m->base_color.xyz : (float3)(1.0f);
+}
+
 /* The fraction of light a shadow ray passes through the triangle `tri` at
- * uv: 1 - alpha, over the rows of a mix weighed by their chance and scale
- * (a Transparent BSDF is a row of alpha 0). */
-inline float Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
+ * uv, per channel: 1 - alpha times the pass tint, over the rows of a mix
+ * weighed by their chance and scale (a Transparent BSDF is a row of alpha 0). */
+inline float3 Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
     Material m = sc->materials[sc->material_of[tri]];
 #ifdef SCENE_HAS_MIX
-    float passed = 0.0f, reach = 1.0f;
+    float3 passed = (float3)(0.0f);
+    float reach = 1.0f;
     for (int i = 0; i < SURFACE_MAX_MIX; ++i) {
         float stop = m.mix_next >= 0 ? Surface_mix_stop(sc, &m, uv) : 1.0f;
-        passed += reach * stop * m.mix_scale * (1.0f - m.base_color.w);
+        passed += reach * stop * m.mix_scale * (1.0f - m.base_color.w) * Surface_pass_tint(&m);
         reach *= 1.0f - stop;
         if (m.mix_next < 0 || !(reach > 0.0f)) break;
         m = sc->materials[m.mix_next];
     }
     return clamp(passed, 0.0f, 1.0f);
 #else
-    return 1.0f - m.base_color.w;
+    return (1.0f - m.base_color.w) * Surface_pass_tint(&m);
 #endif
 }
 

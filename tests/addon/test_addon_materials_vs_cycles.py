@@ -40,6 +40,7 @@ MATERIALS = {
     "mix": dict(mixed="ShaderNodeMixShader"),
     "add": dict(mixed="ShaderNodeAddShader"),
     "cutout": dict(mixed="cutout"),
+    "tinted_transparent": dict(mixed="tinted"),
 }
 BASE = (0.8, 0.45, 0.2, 1.0)
 
@@ -81,9 +82,21 @@ def _textured(bpy, mat, what):
 def _mixed(bpy, mat, how):
     """A Mix Shader (Fac 0.4) or an Add Shader of a Diffuse BSDF and a
     rough Glossy BSDF, or ("cutout") a Principled BSDF mixed with a
-    Transparent BSDF by stripes of an image on the Fac."""
+    Transparent BSDF by stripes of an image on the Fac, or ("tinted") with
+    an orange Transparent BSDF at Fac 0.4."""
     tree = mat.node_tree
     out = tree.nodes["Material Output"]
+    if how == "tinted":
+        node = tree.nodes["Principled BSDF"]
+        node.inputs["Base Color"].default_value = BASE
+        mix = tree.nodes.new("ShaderNodeMixShader")
+        transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
+        transparent.inputs["Color"].default_value = (0.9, 0.5, 0.2, 1.0)
+        mix.inputs["Fac"].default_value = 0.4
+        tree.links.new(transparent.outputs[0], mix.inputs[1])
+        tree.links.new(node.outputs[0], mix.inputs[2])
+        tree.links.new(mix.outputs[0], out.inputs["Surface"])
+        return mat
     if how == "cutout":
         node = tree.nodes["Principled BSDF"]
         node.inputs["Base Color"].default_value = BASE

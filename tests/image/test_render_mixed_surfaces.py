@@ -9,7 +9,7 @@ import pytest
 from scenes_py import box_scene, camera_looking_down, make_scene, quad
 
 from gpu_core.renderer import Renderer
-from gpu_core.scene import LIGHT_POINT, LIGHT_SUN, TEXTURE_LUMINANCE, Lights, Materials
+from gpu_core.scene import LIGHT_POINT, LIGHT_SUN, MATERIAL_TRANSPARENT, TEXTURE_LUMINANCE, Lights, Materials
 from gpu_core.scene.tables import scene_defines
 from gpu_core.settings import RenderSettings
 
@@ -112,6 +112,23 @@ def test_a_transparent_surface_in_a_mix_lets_its_share_of_light_through_shadows(
     x = (np.arange(SIZE) + 0.5) / SIZE * 2.0 - 1.0
     shaded, lit = image[:, x < -0.2].mean(), image[:, x > 0.2].mean()
     assert shaded / lit == pytest.approx(0.4, abs=0.01)
+
+
+def test_a_tinted_transparent_sheet_tints_the_light_through_it_and_the_view(device):
+    # a white floor under a sun straight down, a Transparent shader sheet of
+    # colour c above its middle: the light reaches the floor through the
+    # sheet and the camera sees it through the sheet again, c^2 of the open floor
+    tint = np.array([0.9, 0.5, 0.2])
+    sun = Lights.make([dict(kind=LIGHT_SUN, direction=(0, 0, -1), power=(2.0,) * 3)])
+    tris = np.concatenate([quad((0, 0, 0), 4.0), quad((0, 0, 1.0), 1.0)])
+    mats = Materials.make([dict(base_color=(0.8, 0.8, 0.8)),
+                           dict(shader=MATERIAL_TRANSPARENT, base_color=tuple(tint))])
+    scene = make_scene(tris, [0, 0, 1, 1], mats, sun, camera_looking_down(4.0, 1.0, SIZE))
+    image, stats = render(device, scene, **DIRECT)
+    assert "alpha_shadows" in stats["plan"] and np.isfinite(image).all()
+    c = SIZE // 2
+    through, open_floor = image[c - 2:c + 2, c - 2:c + 2].mean(axis=(0, 1)), image[:3, :3].mean(axis=(0, 1))
+    np.testing.assert_allclose(through / open_floor, tint ** 2, rtol=0.02)
 
 
 def test_mixes_are_planned_only_where_a_triangle_uses_one(device):
