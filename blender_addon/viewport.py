@@ -2,7 +2,7 @@
 thread renders it, view_draw shows the latest image.
 
 After an edit or a view change the worker renders a coarse image first (a
-quarter of the resolution, one sample, a quarter of the photons where the
+quarter of the resolution, one sample, an eighth of the photons where the
 edit makes them traced again), then the full resolution with one
 sample, then keeps adding samples (1, 2, 4, ... per pass, up to
 ``MAX_PASS_SAMPLES``) into an accumulation buffer until Viewport Samples
@@ -35,7 +35,7 @@ COARSE_FACTOR = 4
 # fewest cache points of a coarse pass
 COARSE_MIN_CACHE_POINTS = 32
 # share of the photons a coarse pass traces when the maps held cannot serve it
-COARSE_PHOTON_SHARE = 0.25
+COARSE_PHOTON_SHARE = 0.125
 # the denoiser's guides, accumulated beside the image
 DENOISE_GUIDES = ("Denoising Albedo", "Denoising Normal")
 # shortest time between two status-line redraws during a pass
@@ -127,7 +127,7 @@ def pass_settings(settings, step: Pass):
     (the session denoises the accumulated image), the denoiser's guides on
     full passes when asked; a coarse pass has as many cache points per
     pixel as the full one (a 16th of them) and, where the photon maps must
-    be traced (an edit of the lit scene), a quarter of the photons (the
+    be traced (an edit of the lit scene), an eighth of the photons (the
     full pass traces them all), so it stays quick."""
     settings = dataclasses.replace(settings, samples=step.samples, denoise=False,
                                    denoising_passes=bool(settings.denoise) and not step.coarse)
