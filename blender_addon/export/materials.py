@@ -29,7 +29,8 @@ _SRGB_SPACES = ("sRGB", "sRGB EOTF")
 _SEPARATE_NODES = ("ShaderNodeSeparateColor", "ShaderNodeSeparateRGB")
 _SEPARATE_CHANNELS = {"Red": 0, "Green": 1, "Blue": 2, "R": 0, "G": 1, "B": 2}
 # Principled layers the renderer has no model for, with the input that switches them on
-_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"))
+_PRINCIPLED_UNSUPPORTED = (("Subsurface Weight", "subsurface"), ("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
+                           ("Thin Film Thickness", "thin film"))
 # the tangent an anisotropic shader reads with its Tangent input unlinked, as Cycles: radial about Z
 DEFAULT_TANGENT = ("RADIAL", "Z")
 
@@ -171,6 +172,7 @@ class MaterialTable:
         """The row of a one-lobe shader node (Diffuse, Glossy, Glass, Transparent)."""
         kind = node.bl_idname
         if kind == "ShaderNodeBsdfDiffuse":
+            self._warn_rough_diffuse(name, node, "Roughness")
             return {**self._color(name, node.inputs["Color"]), "roughness": 1.0, **self._normal(name, node)}
         if kind in _GLOSSY:
             return {
@@ -204,6 +206,7 @@ class MaterialTable:
             socket = inputs.get(socket_name)
             if socket is not None and (socket.is_linked or socket.default_value > 0.0):
                 self._warn(f"material '{name}': the Principled BSDF {layer} layer is not supported; left out")
+        self._warn_rough_diffuse(name, node, "Diffuse Roughness")
         return {
             **self._color(name, inputs["Base Color"]),
             **self._texture_value(name, inputs["Metallic"], "metallic"),
@@ -217,6 +220,13 @@ class MaterialTable:
             "emission": tuple(float(c) for c in emission),
             **self._anisotropy(name, node, "Anisotropic", "Anisotropic Rotation"),
         }
+
+    def _warn_rough_diffuse(self, name: str, node, socket_name: str) -> None:
+        """Name a rough diffuse (Cycles' Oren-Nayar, Roughness above 0): rendered Lambertian."""
+        socket = node.inputs.get(socket_name)
+        if socket is not None and (socket.is_linked or socket.default_value > 0.0):
+            self._warn(f"material '{name}': the {socket_name} of {node.name} (Oren-Nayar) is not supported; "
+                       "rendered Lambertian")
 
     def _anisotropy(self, name: str, node, amount: str, rotation: str) -> dict:
         """Row fields of a shader's anisotropy (its ``amount`` and
