@@ -11,12 +11,15 @@
  *                reflection of index eta' (Specular IOR Level) over
  *   diffuse      Lambert, base colour x that weight x what the specular
  *                layer leaves (1 - its directional albedo).
- * All share alpha = roughness^2; every lobe gets Multiscatter GGX's
- * energy (microfacet.h; glass by its own albedo tables); at alpha^2 <= MICROFACET_SINGULAR_ALPHA2 a lobe is
- * a perfect mirror or smooth glass (sampled only, never evaluated).
- * Directions are local to the shading normal's frame, wo towards the
- * viewer (wo.z > 0). Sampling picks one lobe by its estimated albedo and
- * weighs a smooth direction by the whole BSDF over the mixture pdf. */
+ * All share alpha = roughness^2 (metal and specular stretched to alpha_x,
+ * alpha_y along a tangent where anisotropic); every lobe gets Multiscatter
+ * GGX's energy (microfacet.h; glass by its own albedo tables); at alpha^2
+ * <= MICROFACET_SINGULAR_ALPHA2 a lobe is a perfect mirror or smooth glass
+ * (sampled only, never evaluated). Directions are local to the shading
+ * normal's frame, wo towards the viewer; the glossy lobes work in a frame
+ * of their own where it differs (raised normal, anisotropic tangent).
+ * Sampling picks one lobe by its estimated albedo and weighs a smooth
+ * direction by the whole BSDF over the mixture pdf. */
 #ifndef GPUGI_BSDF_H
 #define GPUGI_BSDF_H
 #include "device/structs.h"

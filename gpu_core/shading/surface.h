@@ -122,12 +122,13 @@ inline float3 Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
 #endif
 }
 
-/* The tangent of a normal map at sp (in w its bitangent's sign) for the
- * normal n as wound: the corners' tangents interpolated (MikkTSpace's, per
- * vertex, as Cycles uses them) where the scene has them, else the
- * triangle's UV direction made orthogonal to n with the sign of the UV
- * winding (the same where UVs run along the faces, as on a UV sphere).
- * w = 0: no tangent (degenerate UVs). */
+/* The tangent at sp (in w its bitangent's sign) for the normal n as
+ * wound, for a normal map or anisotropy: the corners' tangents interpolated
+ * where the scene has them (the exporter's: MikkTSpace's, per vertex, as
+ * Cycles uses them, or radial ones for Cycles' default anisotropic
+ * tangent), else the triangle's UV direction made orthogonal to n with the
+ * sign of the UV winding (the same as MikkTSpace's where UVs run along the
+ * faces, as on a UV sphere). w = 0: no tangent (degenerate UVs). */
 inline float4 Surface_tangent(const SceneView *sc, const SurfacePoint *sp, float3 n) {
     int t = sp->tri;
 #ifdef SCENE_HAS_TANGENTS
