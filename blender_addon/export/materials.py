@@ -172,8 +172,8 @@ class MaterialTable:
         """The row of a one-lobe shader node (Diffuse, Glossy, Glass, Transparent)."""
         kind = node.bl_idname
         if kind == "ShaderNodeBsdfDiffuse":
-            self._warn_rough_diffuse(name, node, "Roughness")
-            return {**self._color(name, node.inputs["Color"]), "roughness": 1.0, **self._normal(name, node)}
+            return {**self._color(name, node.inputs["Color"]), "roughness": 1.0,
+                    "diffuse_roughness": self._value(name, node.inputs["Roughness"]), **self._normal(name, node)}
         if kind in _GLOSSY:
             return {
                 **self._color(name, node.inputs["Color"]),
@@ -206,7 +206,6 @@ class MaterialTable:
             socket = inputs.get(socket_name)
             if socket is not None and (socket.is_linked or socket.default_value > 0.0):
                 self._warn(f"material '{name}': the Principled BSDF {layer} layer is not supported; left out")
-        self._warn_rough_diffuse(name, node, "Diffuse Roughness")
         return {
             **self._color(name, inputs["Base Color"]),
             **self._texture_value(name, inputs["Metallic"], "metallic"),
@@ -218,15 +217,10 @@ class MaterialTable:
             "specular_tint": tuple(self._color_value(name, inputs["Specular Tint"])),
             "alpha": self._value(name, inputs["Alpha"]),
             "emission": tuple(float(c) for c in emission),
+            **({"diffuse_roughness": self._value(name, inputs["Diffuse Roughness"])}
+               if "Diffuse Roughness" in inputs else {}),
             **self._anisotropy(name, node, "Anisotropic", "Anisotropic Rotation"),
         }
-
-    def _warn_rough_diffuse(self, name: str, node, socket_name: str) -> None:
-        """Name a rough diffuse (Cycles' Oren-Nayar, Roughness above 0): rendered Lambertian."""
-        socket = node.inputs.get(socket_name)
-        if socket is not None and (socket.is_linked or socket.default_value > 0.0):
-            self._warn(f"material '{name}': the {socket_name} of {node.name} (Oren-Nayar) is not supported; "
-                       "rendered Lambertian")
 
     def _anisotropy(self, name: str, node, amount: str, rotation: str) -> dict:
         """Row fields of a shader's anisotropy (its ``amount`` and

@@ -95,6 +95,8 @@ MATERIAL = Struct("Material", "a material row (shading/bsdf.h)", [
     ("aniso_x", "float", "the metal and specular lobes' alpha along the tangent over roughness^2 (1: isotropic)"),
     ("aniso_y", "float", "and along the bitangent"),
     ("aniso_rotation", "float", "the tangent turned about the normal, in turns"),
+    ("diffuse_roughness", "float", "the diffuse lobe's Oren-Nayar roughness (0: Lambert)"),
+    ("pad", "int", "", 3),
 ])
 
 LIGHT = Struct("Light", "a light row; derived values are computed on the host in float64", [

@@ -64,6 +64,7 @@ class Materials:
     # corner tangents (Scene.tangents; a triangle's UV direction without)
     anisotropy: np.ndarray
     anisotropic_rotation: np.ndarray  # (M,) float32, in turns about the normal
+    diffuse_roughness: np.ndarray  # (M,) float32: Principled's Diffuse Roughness or the Diffuse node's (Oren-Nayar)
     names: list[str] = field(default_factory=list)
 
     @staticmethod
@@ -94,6 +95,7 @@ class Materials:
             shader=MATERIAL_PRINCIPLED,
             anisotropy=0.0,
             anisotropic_rotation=0.0,
+            diffuse_roughness=0.0,
             name="",
         )
         rows = [{**defaults, **row} for row in rows] or [dict(defaults, name="default")]

@@ -55,7 +55,9 @@ typedef struct {
     bool mapped;          /* a normal map moved the shading normal off the smooth one */
     float rough, alpha2;
     bool singular;
-    float3 diffuse;       /* Lambert albedo (weights and layering applied) */
+    float3 diffuse;       /* the diffuse lobe's albedo (weights and layering applied) */
+    float on_a, on_b;     /* Oren-Nayar's A and B (B = 0: Lambert) */
+    float3 on_ms;         /* and its multiple-scattering term for this view */
     float w_specular, w_metal, w_glass;
     float spec_eta;
     float3 spec_f0, spec_ms;
@@ -106,6 +108,28 @@ inline float3 Bsdf_glossy_normal(float3 ng, float3 wo, float3 n) {
     float root = sqrt(fmax(b * b - 4.0f * a * c, 0.0f));
     float nz2 = clamp(0.25f * (ix < 0.0f ? b + root : b - root) / a, 0.0f, 1.0f);
     return normalize(sqrt(1.0f - nz2) * x + sqrt(nz2) * ng);
+}
+
+/* Fujii's improved Oren-Nayar, as Cycles' rough diffuse: the
+ * directional albedo's angular part G(cos) (E(cos) = A pi + B G(cos)),
+ * its series near grazing. */
+inline float Bsdf_oren_nayar_G(float c) {
+    if (c < 1e-6f) return (0.5f * PI_F - 2.0f / 3.0f) - c;
+    float s = sqrt(fmax(1.0f - c * c, 0.0f)), theta = acos(clamp(c, -1.0f, 1.0f));
+    return s * (theta - 2.0f / 3.0f - s * c) + (2.0f / 3.0f) * (s / c) * (1.0f - s * s * s);
+}
+
+/* The diffuse lobe's shape for the local light direction wi (wi.z > 0),
+ * its albedo factored out: cos / pi (Lambert), or Oren-Nayar's
+ * cos (A + B t) plus the multiple-scattering term OpenPBR adds to keep
+ * its energy, (1 - E(cos)) times on_ms. */
+inline float3 Bsdf_diffuse_shape(const Bsdf *f, float3 wi) {
+    float nl = wi.z;
+    if (!(f->on_b > 0.0f)) return (float3)(nl / PI_F);
+    float nv = f->wo.z, t = dot(wi, f->wo) - nl * nv;
+    if (t > 0.0f) t /= fmax(nl, nv) + FLT_MIN;
+    float el = f->on_a * PI_F + f->on_b * Bsdf_oren_nayar_G(nl);
+    return nl * ((float3)(f->on_a + f->on_b * t) + f->on_ms * (1.0f - el));
 }
 
 /* Metal Fresnel at cos to the microfacet normal. */
@@ -214,6 +238,19 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     }
     f.diffuse = m->shader == MATERIAL_PRINCIPLED ? c * (scale * (1.0f - metallic) * (1.0f - transmission) * layer)
                                                  : (float3)(0.0f);
+    /* rough diffuse: Oren-Nayar's A, B and multiple scattering for this view (Cycles' constants) */
+    float sigma = clamp(m->diffuse_roughness, 0.0f, 1.0f);
+    f.on_a = 1.0f / PI_F;
+    f.on_b = 0.0f;
+    f.on_ms = (float3)(0.0f);
+    if (sigma >= 1e-5f) {
+        f.on_a = 1.0f / (PI_F + sigma * (0.5f * PI_F - 2.0f / 3.0f));
+        f.on_b = sigma * f.on_a;
+        float e_avg = f.on_a * PI_F + ((2.0f * PI_F - 5.6f) / 3.0f) * f.on_b;
+        float3 albedo = clamp(c, 0.0f, 1.0f);
+        float3 e_ms = (albedo * albedo) * (e_avg / (PI_F * (1.0f - e_avg))) / (one - albedo * (1.0f - e_avg));
+        f.on_ms = e_ms * (1.0f - (f.on_a * PI_F + f.on_b * Bsdf_oren_nayar_G(f.wo.z)));
+    }
     /* sampling weights: each lobe's albedo, estimated at the normal */
     for (int i = 0; i < BSDF_LOBES; ++i) f.q[i] = 0.0f;
     f.q[BSDF_DIFFUSE] = Bsdf_avg(f.diffuse);
@@ -270,7 +307,7 @@ inline float3 Bsdf_eval(const Bsdf *f, float3 wi, float3 *diffuse, float *pdf) {
     *pdf = 0.0f;
     bool below = dot(wi, f->ng) < 0.0f;
     if (!below && wi.z > 0.0f) {
-        *diffuse = f->diffuse * (wi.z / PI_F) * Bsdf_bump_shadowing(f, wi, up, true);
+        *diffuse = f->diffuse * Bsdf_diffuse_shape(f, wi) * Bsdf_bump_shadowing(f, wi, up, true);
         *pdf += f->q[BSDF_DIFFUSE] * wi.z / PI_F;
     }
     if (f->singular) return none;

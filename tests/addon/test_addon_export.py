@@ -326,7 +326,7 @@ def test_a_material_edit_that_adds_a_normal_map_gives_the_mesh_its_tangents(bpy)
     np.testing.assert_allclose(np.abs(second.tangents[..., 0]), 1.0, atol=1e-5)  # the plane's U runs along x
 
 
-def test_rough_diffuse_and_thin_film_are_named_in_the_warnings(bpy):
+def test_rough_diffuse_is_exported_and_thin_film_named_in_the_warnings(bpy):
     bpy.ops.mesh.primitive_plane_add(size=1)
     principled, _ = _material(bpy, "ShaderNodeBsdfPrincipled", **{"Diffuse Roughness": 0.5,
                                                                     "Thin Film Thickness": 300.0})
@@ -334,10 +334,12 @@ def test_rough_diffuse_and_thin_film_are_named_in_the_warnings(bpy):
     bpy.ops.mesh.primitive_plane_add(size=1, location=(2, 0, 0))
     diffuse, _ = _material(bpy, "ShaderNodeBsdfDiffuse", Roughness=0.3)
     bpy.context.object.data.materials.append(diffuse)
-    warnings = _export(bpy).warnings
-    assert any("Diffuse Roughness" in w and "Oren-Nayar" in w for w in warnings)
-    assert any("thin film" in w for w in warnings)
-    assert any("ShaderNodeBsdfDiffuse" in w and "Oren-Nayar" in w for w in warnings)
+    scene = _export(bpy)
+    m = scene.materials
+    assert m.diffuse_roughness[m.names.index("ShaderNodeBsdfPrincipled")] == pytest.approx(0.5)
+    assert m.diffuse_roughness[m.names.index("ShaderNodeBsdfDiffuse")] == pytest.approx(0.3)
+    assert any("thin film" in w for w in scene.warnings)
+    assert not any("Roughness" in w for w in scene.warnings)
 
 
 def test_a_bump_node_on_normal_is_named_in_the_warnings(bpy):

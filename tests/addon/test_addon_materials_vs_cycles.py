@@ -35,6 +35,8 @@ MATERIALS = {
     "metal_anisotropic": {"metallic": 1.0, "roughness": 0.4, "Anisotropic": 0.8, "Anisotropic Rotation": 0.1},
     "plastic_anisotropic": {"roughness": 0.3, "Anisotropic": 1.0},
     "glossy_node_anisotropic": dict(node="ShaderNodeBsdfGlossy", roughness=0.4, Anisotropy=-0.5),
+    "diffuse_rough": {"roughness": 0.5, "Diffuse Roughness": 0.8},
+    "diffuse_node_rough": dict(node="ShaderNodeBsdfDiffuse", roughness=1.0),
     "textured": dict(textured="values"),
     "normal_map": dict(textured="normals"),
     "mix": dict(mixed="ShaderNodeMixShader"),

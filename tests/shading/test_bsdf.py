@@ -109,6 +109,8 @@ CASES = {
     "metal_rough_0.3": dict(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3),
     "metal_rough_1": dict(base_color=(0.9, 0.9, 0.9), metallic=1.0, roughness=1.0),
     "plastic_layered_0.5": dict(base_color=(0.5, 0.2, 0.1), roughness=0.5, specular_ior_level=0.5),
+    "rough_diffuse_0.8": dict(base_color=(0.7, 0.5, 0.3), roughness=0.5, specular_ior_level=0.5,
+                              diffuse_roughness=0.8),
     "plastic_layered_0.2": dict(base_color=(0.8, 0.8, 0.8), roughness=0.2, specular_ior_level=1.0),
     "glass_rough_0.3": dict(base_color=(1, 1, 1), transmission=1.0, roughness=0.3, ior=1.5),
     "glass_rough_0.7_tinted": dict(base_color=(0.6, 0.8, 1.0), transmission=1.0, roughness=0.7, ior=1.33),
@@ -221,6 +223,29 @@ def test_glossy_lobes_on_a_normal_facing_away_sample_their_raised_normal(device,
     f, pdf_eval = evaluate(device, row, GRAZING, wi[ok], ns=AWAY_NORMAL)
     np.testing.assert_allclose(pdf_eval, pdf[ok], rtol=2e-3)
     np.testing.assert_allclose(weight[ok] * pdf[ok, None], f, rtol=2e-3, atol=1e-7)
+
+
+# -- rough diffuse (Oren-Nayar) --------------------------------------------------------
+
+
+@pytest.mark.parametrize("roughness", [0.5, 1.0])
+def test_white_rough_diffuse_keeps_all_the_energy(device, roughness):
+    # Fujii's Oren-Nayar with OpenPBR's multiple-scattering term, as Cycles
+    for cos_theta in (1.0, 0.5, 0.1):
+        a = albedo(device, material(base_color=(1, 1, 1), diffuse_roughness=roughness), cos_theta)
+        np.testing.assert_allclose(a, 1.0, atol=0.01)
+
+
+def test_rough_diffuse_scatters_back_toward_the_light(device):
+    # a rough surface seen 60 degrees off is brighter lit from behind the
+    # viewer than from the mirror direction; a Lambertian one is not
+    wo = view(0.5)
+    back, mirror = wo[:3].copy(), wo[:3] * np.array([-1.0, -1.0, 1.0])
+    for roughness, brighter in ((0.0, False), (1.0, True)):
+        f, _ = evaluate(device, material(base_color=(0.8, 0.8, 0.8), diffuse_roughness=roughness), wo,
+                        np.stack([back, mirror]))
+        ratio = f[0, 0] / f[1, 0]
+        assert (ratio > 1.3) if brighter else ratio == pytest.approx(1.0, rel=1e-5)
 
 
 # -- anisotropy ---------------------------------------------------------------------
