@@ -2,23 +2,14 @@
 
 import dataclasses
 
-import numpy as np
 import pytest
-from scenes_py import camera_looking_down, plane_scene
 
-from gpu_core.renderer import Renderer
-from gpu_core.scene import LIGHT_POINT, Lights
 from gpu_core.settings import MODES, PRESETS, RenderSettings, preset
 
 LADDER = ("draft", "preview", "final", "reference")
 # knobs where a higher step costs more and gives less error
 GROWING = ("samples", "diffuse_bounces", "global_photons", "caustic_photons", "photon_k", "cache_seeds",
            "gather_rays", "gi_subpixels")
-
-
-def _scene():
-    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 2.0), power=(100.0,) * 3)])
-    return plane_scene(lights, camera_looking_down(size=8))
 
 
 def test_unknown_choices_are_validated_to_their_defaults():

@@ -14,7 +14,7 @@ from gpu_core.photons.reweight import reweight_maps
 from gpu_core.photons.trace import PhotonSettings, trace_maps
 from gpu_core.plan import Held, plan
 from gpu_core.renderer import Renderer
-from gpu_core.scene import LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, Lights, validate
+from gpu_core.scene import LIGHT_POINT, LIGHT_SPOT, Lights, validate
 from gpu_core.scene.tables import scene_defines, scene_tables
 from gpu_core.scene.upload import upload
 from gpu_core.settings import RenderSettings
