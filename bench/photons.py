@@ -82,7 +82,7 @@ def cornell_box() -> Scene:
     mat_of = [m for *_, m in walls for _ in range(2)] + [3] * len(tris[-1])
     materials = Materials.make([
         dict(base_color=(0.73, 0.73, 0.73)), dict(base_color=(0.63, 0.06, 0.05)),
-        dict(base_color=(0.14, 0.45, 0.09)), dict(base_color=(1, 1, 1), transmission=1.0, ior=1.5),
+        dict(base_color=(0.14, 0.45, 0.09)), dict(base_color=(1, 1, 1), transmission=1.0, ior=1.5, roughness=0.0),
     ])
     lights = Lights.make([dict(kind=LIGHT_AREA, position=(0, 0, 0.99), power=(100, 100, 100),
                                axis_u=(0.5, 0, 0), axis_v=(0, 0.5, 0))])
