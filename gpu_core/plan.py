@@ -143,14 +143,13 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1
         emitters = emitter_powers(scene, tables)
-        counts = (settings.global_photons, settings.caustic_photons)
-        maps, photon_key, reused, scales, why = _photon_choice(scene, settings, tables, generations, held, emitters,
-                                                               counts)
+        counts, specular = (settings.global_photons, settings.caustic_photons), scene.has_specular()
+        choice = (scene, settings, tables, generations, held, emitters, specular)
+        maps, photon_key, reused, scales, why = _photon_choice(*choice, counts)
         if not reused and scales is None and settings.photon_share < 1.0:
             # the maps are traced anyway: a share of them (a quick image)
             counts = tuple(max(1, round(c * settings.photon_share)) if c > 0 else 0 for c in counts)
-            maps, photon_key, reused, scales, why = _photon_choice(scene, settings, tables, generations, held,
-                                                                   emitters, counts)
+            maps, photon_key, reused, scales, why = _photon_choice(*choice, counts)
         if why:
             reuse["photons"] = why
         cache_key = (photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS)
@@ -176,9 +175,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
         emitters=emitters, photon_maps=maps, photon_counts=counts, photons_reused=reused, photon_scales=scales,
-        photon_key=photon_key,
-        cache_reused=cache_reused,
-        cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
+        photon_key=photon_key, cache_reused=cache_reused, cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
         image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
     the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
     if device is not None and hasattr(device, "device"):
@@ -187,11 +184,11 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
 
 
 def _photon_choice(scene: Scene, settings: RenderSettings, tables: SceneTables, generations: dict, held: Held,
-                   emitters: list[Emitter], counts: tuple) -> tuple:
+                   emitters: list[Emitter], specular: bool, counts: tuple) -> tuple:
     """The photon maps of ``counts`` (global, caustic) photons: which are
     built, their key, whether the maps held are those (reused) or can be
     reweighted to them (the factors), and why."""
-    maps = maps_needed(emitters, scene.triangle_count, scene.has_specular(), *counts)
+    maps = maps_needed(emitters, scene.triangle_count, specular, *counts)
     key = counts + tuple(getattr(settings, k) for k in _PHOTON_KNOBS[2:]) + tuple(generations[p] for p in _PHOTON_PARTS)
     if key == held.photon_key:
         return maps, key, True, None, "neither the lit scene nor the photon settings changed"
@@ -249,6 +246,7 @@ def _gi_stages(maps: dict[str, str], photons: str, cache_reused: bool, records_r
 
 # device bytes per item, generous estimates (the kd-tree's own arrays vary with the scene)
 _TRIANGLE_BYTES = 48 + 48 + 24 + 4 + 4 * 8 + 16  # corners, normals, uvs, material, leaf references and nodes
+_TANGENT_BYTES = 48  # corner tangents, where a scene has them
 _STORED_PHOTON_BYTES = 4 * 16 + 4 * 16 + 16  # trace buffers, tree points and attributes, a node share
 _GRID_SLOT_BYTES = 4 * 16 + 16 + 16 + 8 + 4 + 16 + 24  # grid, compacted point, cache work arrays
 
@@ -260,8 +258,8 @@ def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tup
     texels = len(tables.atlas) * 16
     window = scene.camera.pixel_window
     film = film_bytes(window, settings)
-    need = n * (_TRIANGLE_BYTES + (48 if len(scene.tangents) else 0)) + texels + film + tables.lights.nbytes
-    need += tables.materials.nbytes
+    per_triangle = _TRIANGLE_BYTES + (_TANGENT_BYTES if len(scene.tangents) else 0)
+    need = n * per_triangle + texels + film + tables.lights.nbytes + tables.materials.nbytes
     largest = max(n * 48, texels, film)
     if settings.mode == "gi":
         x0, y0, x1, y1 = window

@@ -138,15 +138,24 @@ def radial_tangents(local: LocalMesh, matrix, axis: str) -> np.ndarray:
     g = (local.positions.astype(np.float64) - centre) / np.where(size != 0.0, size, 1.0) * 0.5
     x, y, z = g[..., 0], g[..., 1], g[..., 2]
     zero = np.zeros_like(x)
-    t = {"X": (zero, -z, y), "Y": (-z, zero, x)}.get(axis, (-y, x, zero))
-    t = np.stack(t, axis=-1)
-    m = np.asarray(matrix, np.float64)[:3, :3]
-    det = np.linalg.det(m)
-    t = t @ (np.linalg.inv(m).T if abs(det) > 1e-300 else m).T
-    length = np.linalg.norm(t, axis=-1, keepdims=True)
-    t = np.where(length > 0, t / np.where(length > 0, length, 1.0), 0.0)
+    t = np.stack({"X": (zero, -z, y), "Y": (-z, zero, x)}.get(axis, (-y, x, zero)), axis=-1)
+    normal_matrix, det = _normal_matrix(np.asarray(matrix, np.float64)[:3, :3])
+    t = _unit_rows(t @ normal_matrix.T)
     rows = np.concatenate([t, np.ones(t.shape[:-1] + (1,))], axis=-1).astype(np.float32)
     return np.ascontiguousarray(rows[:, ::-1] if det < 0 else rows)
+
+
+def _normal_matrix(lin: np.ndarray) -> tuple[np.ndarray, float]:
+    """The matrix normals turn by (the inverse transpose of ``lin``, itself
+    where it is singular) and ``lin``'s determinant."""
+    det = float(np.linalg.det(lin))
+    return (np.linalg.inv(lin).T if abs(det) > 1e-300 else lin), det
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    """The vectors of the last axis at unit length; zero ones stay zero."""
+    length = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(length > 0, v / np.where(length > 0, length, 1.0), 0.0)
 
 
 def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -160,16 +169,11 @@ def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndar
     m = np.asarray(matrix, np.float64)
     lin, offset = m[:3, :3], m[:3, 3]
     world = local.positions.astype(np.float64) @ lin.T + offset
-    det = np.linalg.det(lin)
-    normal_matrix = np.linalg.inv(lin).T if abs(det) > 1e-300 else lin
-    n = local.normals.astype(np.float64) @ normal_matrix.T
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
-    n = np.where(length > 0, n / np.where(length > 0, length, 1.0), 0.0)
+    normal_matrix, det = _normal_matrix(lin)
+    n = _unit_rows(local.normals.astype(np.float64) @ normal_matrix.T)
     uvs, tangents = local.uvs, None
     if local.tangents is not None:
-        t = local.tangents[..., :3].astype(np.float64) @ lin.T
-        length = np.linalg.norm(t, axis=-1, keepdims=True)
-        t = np.where(length > 0, t / np.where(length > 0, length, 1.0), 0.0)
+        t = _unit_rows(local.tangents[..., :3].astype(np.float64) @ lin.T)
         tangents = np.concatenate([t, local.tangents[..., 3:] * (-1.0 if det < 0 else 1.0)], axis=-1).astype(np.float32)
     if det < 0:
         world, n, uvs = world[:, ::-1], n[:, ::-1], uvs[:, ::-1]

@@ -63,6 +63,8 @@ def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:
     return table
 
 
+# the largest reweighting factor: photon powers scaled past it could leave float range
+_LARGEST_SCALE = 1e20
 # light-table fields a photon's path depends on: where a light is and how it
 # shines, not how bright it is (power, radiance and the shadow-ray pick)
 _PATH_FIELDS = ("position", "direction", "axis_u", "axis_v", "radius", "cos_half", "spot_smooth", "sun_norm", "kind",
@@ -96,9 +98,6 @@ def reweight_scales(traced: list[Emitter], traced_lights: np.ndarray, emitters: 
         scales[i, :3] = factor
     return scales
 
-
-# the largest reweighting factor: photon powers scaled past it could leave float range
-_LARGEST_SCALE = 1e20
 
 MAPS = ("global", "caustic")
 

@@ -58,7 +58,7 @@ class Materials:
     mix_channel: np.ndarray  # (M,) int32, as roughness_channel
     specular_ior_level: np.ndarray  # (M,) float32: 0 no dielectric layer, 0.5 F0 of the IOR, 1 twice that
     specular_tint: np.ndarray  # (M, 3) float32: tints F0 of the dielectric layers, F82 of the metal
-    shader: np.ndarray  # (M,) int32: MATERIAL_PRINCIPLED, MATERIAL_GLOSSY or MATERIAL_GLASS
+    shader: np.ndarray  # (M,) int32: MATERIAL_PRINCIPLED, MATERIAL_GLOSSY, MATERIAL_GLASS or MATERIAL_TRANSPARENT
     # (M,) float32: Principled's Anisotropic (0..1) or the Glossy node's
     # Anisotropy (-1..1), stretching the metal and specular lobes along the
     # corner tangents (Scene.tangents; a triangle's UV direction without)
@@ -259,9 +259,10 @@ class Scene:
     world_color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
     textures: list[np.ndarray] = field(default_factory=list)  # (H, W, 4) float32, linear
     texture_closest: list[bool] = field(default_factory=list)  # per texture: the nearest texel, not bilinear
-    # (N, 3, 4) float32 per corner: the normal map's tangent (world) and in w
-    # its bitangent's sign, as MikkTSpace gives them; empty (0, 3, 4): none
-    # (tangents then come from each triangle's UVs); a zero tangent, the same
+    # (N, 3, 4) float32 per corner: the tangent (world) a normal map or
+    # anisotropy reads and in w its bitangent's sign (MikkTSpace's, or radial
+    # ones); empty (0, 3, 4): none (tangents then come from each triangle's
+    # UVs); a zero tangent, the same
     tangents: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 4), np.float32))
     warnings: list[str] = field(default_factory=list)
     report: ValidationReport = field(default_factory=ValidationReport)
@@ -323,8 +324,10 @@ class Scene:
     def has_tangents(self) -> bool:
         """Whether corner tangents are given and a triangle's material reads
         them: a normal map, or anisotropy."""
+        if not len(self.tangents):
+            return False
         used, m = self.used_materials(), self.materials
-        return len(self.tangents) > 0 and bool(((m.normal_texture[used] >= 0) | (m.anisotropy[used] != 0)).any())
+        return bool(((m.normal_texture[used] >= 0) | (m.anisotropy[used] != 0)).any())
 
     def has_textures(self) -> bool:
         """Whether a triangle's material reads a texture."""

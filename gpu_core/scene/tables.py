@@ -72,7 +72,7 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
 def scene_defines(scene: Scene) -> dict:
     """The features every program reading ``scene`` is compiled with: only
     those it has (textures, see-through surfaces, mixes of surfaces, corner
-    tangents for normal maps)."""
+    tangents for normal maps and anisotropy)."""
     has = {"SCENE_HAS_TEXTURES": scene.has_textures(), "SCENE_HAS_ALPHA": scene.has_alpha(),
            "SCENE_HAS_MIX": scene.has_mix(), "SCENE_HAS_TANGENTS": scene.has_tangents()}
     return {define: 1 for define, wanted in has.items() if wanted}

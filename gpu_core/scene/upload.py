@@ -51,9 +51,8 @@ class SceneBuffers:
         world = self.world.copy()
         world[3] = 1.0 if transparent else 0.0
         return [*self.tree.kernel_args(), self.normals, self.uvs, self.tangents, self.material_ids, self.materials,
-                self.atlas,
-                self.texture_infos, self.lights, np.int32(self.light_count), self.emit_tris, self.emit_cdf,
-                np.int32(self.emit_count), self.camera, world]
+                self.atlas, self.texture_infos, self.lights, np.int32(self.light_count), self.emit_tris,
+                self.emit_cdf, np.int32(self.emit_count), self.camera, world]
 
 
 def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuffers | None = None,
@@ -94,8 +93,7 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
     return SceneBuffers(
         device=device, center=tables.center, radius=tables.radius, tree=geometry[0], normals=geometry[1],
         uvs=geometry[2], material_ids=geometry[3], tangents=geometry[4], materials=materials[0], lights=lights[0],
-        light_count=lights[1],
-        emit_tris=emitters[0], emit_cdf=emitters[1], emit_count=emitters[2], atlas=materials[1],
+        light_count=lights[1], emit_tris=emitters[0], emit_cdf=emitters[1], emit_count=emitters[2], atlas=materials[1],
         texture_infos=materials[2], camera=camera, world=np.append(scene.world_color, 0.0).astype(np.float32))
 
 

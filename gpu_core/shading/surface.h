@@ -122,6 +122,9 @@ inline float3 Surface_transmittance(const SceneView *sc, int tri, float2 uv) {
 #endif
 }
 
+/* 1 where the normal as wound faces the side the ray came from, else -1. */
+inline float Surface_facing(const SurfacePoint *sp) { return dot(sp->ng_raw, sp->ng) > 0.0f ? 1.0f : -1.0f; }
+
 /* The tangent at sp (in w its bitangent's sign) for the normal n as
  * wound, for a normal map or anisotropy: the corners' tangents interpolated
  * where the scene has them (the exporter's: MikkTSpace's, per vertex, as
@@ -155,7 +158,7 @@ inline float4 Surface_tangent(const SceneView *sc, const SurfacePoint *sp, float
  * normal. Without a tangent the smooth normal is kept. */
 inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, float strength) {
     /* the normal as wound (the side the ray came from flips it back below) */
-    float facing = dot(sp->ng_raw, sp->ng) > 0.0f ? 1.0f : -1.0f;
+    float facing = Surface_facing(sp);
     float3 n = facing * sp->ns;
     float4 t = Surface_tangent(sc, sp, n);
     if (t.w == 0.0f) return;
@@ -182,8 +185,7 @@ inline void Surface_normal_map(const SceneView *sc, SurfacePoint *sp, float4 c, 
 inline float3 Surface_textured(const SceneView *sc, Material *m, SurfacePoint *sp) {
     float3 base = m->base_color.xyz;
     if (m->aniso_x != m->aniso_y) {
-        float facing = dot(sp->ng_raw, sp->ng) > 0.0f ? 1.0f : -1.0f;
-        sp->tangent = Surface_tangent(sc, sp, facing * sp->ns).xyz;
+        sp->tangent = Surface_tangent(sc, sp, Surface_facing(sp) * sp->ns).xyz;
     }
 #ifdef SCENE_HAS_TEXTURES
     if (m->texture >= 0) base *= Texture_sample(sc->atlas, sc->textures, m->texture, sp->uv).xyz;
