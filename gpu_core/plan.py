@@ -22,7 +22,7 @@ from .image import programs as image_programs
 from .photons import reweight as photon_reweight
 from .photons import trace as photon_trace
 from .photons.emit import Emitter, emitter_powers, maps_needed, reweight_scales
-from .accel import kdtree_build
+from .accel import kdtree_build, kdtree_overlay
 from .device.primitives import programs as primitives_programs
 from .scene.model import PARTS, Scene, part_digests
 from .scene.tables import SceneTables, scene_tables
@@ -54,6 +54,7 @@ class Held:
     photon_lights: object = None  # and the light table they were traced with
     cache_key: tuple | None = None
     records_keys: tuple = ()  # of the cache records held (views of a lit scene)
+    tree_base: object = None  # (N, 3, 3) triangles the held kd-tree's base was built over (world positions)
 
 
 @dataclass
@@ -82,6 +83,12 @@ class Plan:
     device_bytes: int
     largest_buffer: int
     reuse: dict = field(default_factory=dict)  # what is kept, and why
+    tree_rows: object = None  # triangles moved since the held base tree, when an overlay tree holds them
+
+    @property
+    def builds_tree(self) -> bool:
+        """The whole kd-tree is built (not kept, nor overlaid)."""
+        return "kdtree" in self.stages
 
     @property
     def reweights_photons(self) -> bool:
@@ -132,7 +139,11 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if held.tables is not None and (tables.center != held.tables.center).any():
         changed = set(PARTS)  # the frame moved: everything is uploaded again
     generations = {part: held.generations[part] + (part in changed) for part in PARTS}
-    stages = ["validate", "kdtree_reused" if "geometry" not in changed else "kdtree", "upload", "direct_light"]
+    tree_rows = None
+    if "geometry" in changed and held.tables is not None and (tables.center == held.tables.center).all():
+        tree_rows = kdtree_overlay.moved_rows(held.tree_base, scene.triangles)
+    tree_stage = "kdtree_reused" if "geometry" not in changed else "kdtree" if tree_rows is None else "kdtree_overlay"
+    stages = ["validate", tree_stage, "upload", "direct_light"]
     stages += _features(scene, settings, tables)
     scene_defines = scene_program_defines(scene)
     image_defines = dict(scene_defines)
@@ -172,11 +183,14 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         stages.append("denoise")
     if "geometry" not in changed:
         reuse["kdtree"] = "the triangles did not change"
+    elif tree_rows is not None:
+        reuse["kdtree"] = (f"{len(tree_rows)} of {scene.triangle_count} triangles moved: the tree held is kept "
+                           "and joined with a tree over them")
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
         emitters=emitters, photon_maps=maps, photon_counts=counts, photons_reused=reused, photon_scales=scales,
         photon_key=photon_key, cache_reused=cache_reused, cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
-        image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse)
+        image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse, tree_rows=tree_rows)
     the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
     if device is not None and hasattr(device, "device"):
         the_plan.programs = _programs(device, settings, the_plan)
@@ -278,8 +292,10 @@ def _programs(device, settings: RenderSettings, the_plan: Plan) -> list[tuple[st
     """Every program the render builds, in the order the stages need them
     (they are built from the start, in that order)."""
     wanted = primitives_programs()
-    if "kdtree" in the_plan.stages:
+    if "kdtree" in the_plan.stages or "kdtree_overlay" in the_plan.stages:
         wanted += kdtree_build.programs(device)
+    if "kdtree_overlay" in the_plan.stages:
+        wanted += kdtree_overlay.programs()
     if settings.mode == "gi":
         if the_plan.traces_photons:
             wanted += photon_trace.programs(the_plan.scene_defines)

@@ -131,8 +131,11 @@ class Renderer:
     def _upload(self, scene: Scene, the_plan: Plan, timer: StageTimer, should_stop) -> None:
         """Upload the parts the plan names; the renderer holds them from now on."""
         self._held.tables = None  # until the upload completes, nothing is held
+        self._held.tree_base = None if the_plan.builds_tree else self._held.tree_base
         self._buffers = upload(self.device, scene, the_plan.tables, self._buffers, the_plan.changed, timer,
-                               should_stop)
+                               should_stop, the_plan.tree_rows)
+        if the_plan.builds_tree:  # later moves are overlaid on this tree
+            self._held.tree_base = scene.triangles.copy()
         self._held.digests, self._held.generations = the_plan.digests, the_plan.generations
         self._held.tables = the_plan.tables
         self._unsynced = set()

@@ -118,7 +118,9 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
             /* the side the ray is on before the plane: below unless it runs downwards */
             int first = inv < 0.0f ? n.child : node + 1;
             int second = inv < 0.0f ? node + 1 : n.child;
-            if (isnan(t_split)) { /* the ray runs inside the plane: both sides */
+            /* the ray runs inside the plane, or the node is an overlay
+             * tree's union root (its plane NaN): both sides */
+            if (isnan(t_split)) {
                 stack_node[top] = second;
                 stack_t0[top] = t0;
                 stack_t1[top] = t1;
@@ -149,9 +151,11 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
             node = visit_first ? first : second;
             n = tree->nodes[node];
         }
-        /* leaf: its triangles against the whole remaining ray */
+        /* leaf: its triangles against the whole remaining ray (an overlay
+         * tree's base lists a moved triangle as -1: kdtree_overlay.cl) */
         for (int i = 0; i < n.count; ++i) {
             int tri = tree->leaf_tris[n.child + i];
+            if (tri < 0) continue;
             float t, u, v;
             if (KdTree_triangle(&ray, tree->verts[3 * tri], tree->verts[3 * tri + 1],
                                 tree->verts[3 * tri + 2], tmin, hit->t, &t, &u, &v)) {

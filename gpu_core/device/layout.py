@@ -248,6 +248,15 @@ def float4_rows(vectors) -> np.ndarray:
     return out
 
 
+def rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per row (first axis) of two arrays of one shape and dtype, whether
+    their bytes differ: one comparison per row, however wide."""
+    count = len(a)
+    row = np.dtype((np.void, a.itemsize * (a.size // count if count else 1)))
+    return (np.ascontiguousarray(a).reshape(count, -1).view(row).ravel()
+            != np.ascontiguousarray(b).reshape(count, -1).view(row).ravel())
+
+
 def finite_rows(name: str, array, columns: int, dtype) -> np.ndarray:
     """``array`` as a contiguous (N, columns) array, or ValueError naming it."""
     arr = np.ascontiguousarray(np.asarray(array, dtype).reshape(-1, columns))

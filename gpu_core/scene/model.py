@@ -275,7 +275,7 @@ class Scene:
         """Indices of the materials some triangle uses, with the rows of
         their mixes (chains along mix_next, forward only as the table's)."""
         following = self.materials.next_rows()
-        used = np.unique(self.material_ids)
+        used = self._materials_of_triangles()
         while True:
             nxt = following[used[(used >= 0) & (used < len(following))]]
             more = np.union1d(used, nxt[nxt >= 0])
@@ -285,8 +285,20 @@ class Scene:
 
     def has_mix(self) -> bool:
         """Whether a triangle's material mixes surfaces (a chain of rows)."""
-        following, rows = self.materials.next_rows(), np.unique(self.material_ids)
+        following, rows = self.materials.next_rows(), self._materials_of_triangles()
         return bool((following[rows[(rows >= 0) & (rows < len(following))]] >= 0).any())
+
+    def _materials_of_triangles(self) -> np.ndarray:
+        """The sorted distinct material ids of the triangles: counted per id
+        (much faster than sorting them all) where the ids span a range no
+        wider than the table and the triangles."""
+        ids = np.asarray(self.material_ids).ravel()
+        if not len(ids):
+            return np.zeros(0, ids.dtype)
+        low, high = int(ids.min()), int(ids.max())
+        if high - low > len(ids) + len(self.materials) + 1024:
+            return np.unique(ids)
+        return (np.flatnonzero(np.bincount(ids - low)) + low).astype(ids.dtype)
 
     def has_specular(self) -> bool:
         """Whether a triangle is near-specular metal or glass (roughness
@@ -343,8 +355,11 @@ class Scene:
 
     def triangle_bounds(self) -> np.ndarray:
         """(2, 3): min and max of the triangles' corners; empty (0, 3) without triangles."""
-        corners = self.triangles.reshape(-1, 3)
-        return np.stack([corners.min(axis=0), corners.max(axis=0)]) if len(corners) else np.zeros((0, 3))
+        if not len(self.triangles):
+            return np.zeros((0, 3))
+        # axis by axis (numpy reduces short rows slowly)
+        axes = [self.triangles[:, :, k] for k in range(3)]
+        return np.array([[a.min() for a in axes], [a.max() for a in axes]])
 
     def bounds(self, triangle_bounds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) of triangles and positional lights; a unit box if empty.

@@ -18,6 +18,11 @@ from ..shading import microfacet_tables
 from .model import PARTS, Scene
 
 RADIANCE_MAX = 1e30  # light radiance stays a finite float32
+# The device frame (positions relative to a centre) stays where it is while
+# the centre of the scene's bounds moves by less than this share of their
+# half-diagonal: an object moved a little keeps every other triangle's
+# device coordinates, so the kd-tree held can be overlaid (accel/kdtree_overlay.py).
+FRAME_SLACK = 0.25
 
 
 @dataclass
@@ -38,6 +43,16 @@ class SceneTables:
     triangle_bounds: np.ndarray  # (2, 3) min and max of the triangles (kept while the geometry is)
 
 
+def frame_center(lo: np.ndarray, hi: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
+    """The centre of the device frame for bounds [lo, hi]: their centre, or
+    the ``previous`` frame's while that lies within FRAME_SLACK of it."""
+    mid = 0.5 * (lo + hi)
+    if previous is not None:
+        if float(np.linalg.norm(mid - previous)) <= FRAME_SLACK * 0.5 * float(np.linalg.norm(hi - lo)):
+            return previous
+    return mid
+
+
 def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PARTS) -> SceneTables:
     """The tables of a validated ``scene``; those of ``previous`` are kept
     where no part they are made from is in ``changed``."""
@@ -46,10 +61,11 @@ def scene_tables(scene: Scene, previous: SceneTables | None = None, changed=PART
     else:
         triangle_bounds = scene.triangle_bounds()
     lo, hi = scene.bounds(triangle_bounds)
-    center = 0.5 * (lo + hi)
+    center = frame_center(lo, hi, None if previous is None else previous.center)
     moved = previous is None or not np.array_equal(center, previous.center)
     changed = set(PARTS) if moved else set(changed)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)
+    # the bounding sphere about the frame's centre
+    radius = max(float(np.linalg.norm(np.maximum(hi - center, center - lo))), 1e-6)
     old = previous if not moved else None
     if old is None or changed & {"geometry", "materials"}:
         emit_tris, emit_cdf = emissive_triangles(scene)
@@ -165,15 +181,15 @@ def emissive_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Emissive triangle ids and their inclusive CDF by power (luminance x area)."""
     if scene.triangle_count == 0:
         return np.zeros(0, np.int32), np.zeros(0, np.float32)
-    emission = emission_radiance(scene).astype(np.float64)[scene.material_ids]
-    luminance = emission @ np.array([0.2126, 0.7152, 0.0722])
-    tris = scene.triangles
+    luminance = (emission_radiance(scene).astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722]))[scene.material_ids]
+    lit = np.flatnonzero(luminance > 0)  # the areas of emissive triangles only
+    tris = scene.triangles[lit]
     area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-    power = luminance * area
-    ids = np.nonzero(power > 0)[0].astype(np.int32)
+    power = luminance[lit] * area
+    ids = lit[power > 0].astype(np.int32)
     if ids.size == 0:
         return ids, np.zeros(0, np.float32)
-    cdf = np.cumsum(power[ids])
+    cdf = np.cumsum(power[power > 0])
     cdf = (cdf / cdf[-1]).astype(np.float32)
     cdf[-1] = 1.0
     return ids, cdf

@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-from ..accel import kdtree
+from ..accel import kdtree, kdtree_overlay
 from ..device import Device
 from ..device.layout import float4_rows
 from ..device.timer import StageTimer
@@ -56,19 +56,28 @@ class SceneBuffers:
 
 
 def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuffers | None = None,
-           changed=PARTS, timer: StageTimer | None = None, should_stop: Callable[[], bool] | None = None) -> SceneBuffers:
+           changed=PARTS, timer: StageTimer | None = None, should_stop: Callable[[], bool] | None = None,
+           tree_rows: np.ndarray | None = None) -> SceneBuffers:
     """The device copy of a validated ``scene`` whose ``tables`` are built;
     the buffers of ``previous`` stay where no part they hold is in
-    ``changed`` (the plan says which). The kd-tree build is timed as
-    "kdtree", the rest as "upload"; ``should_stop`` is polled during the
-    kd-tree build (RenderCancelled)."""
+    ``changed`` (the plan says which). With ``tree_rows`` (the plan's
+    triangles moved since the base of ``previous``'s tree) the kd-tree is
+    that base joined with a tree over them (accel/kdtree_overlay.py), else
+    it is built whole. The kd-tree build is timed as "kdtree", the rest as
+    "upload"; ``should_stop`` is polled during the kd-tree build
+    (RenderCancelled)."""
     timer = timer or StageTimer()
     moved = previous is None or not np.array_equal(tables.center, previous.center)
     changed = set(PARTS) if moved else set(changed)
     old = previous if not moved else None
     if old is None or "geometry" in changed:
         with timer.stage("kdtree"):
-            tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32), should_stop)
+            triangles = (scene.triangles - tables.center).astype(np.float32)
+            if tree_rows is not None and old is not None:
+                base = old.tree.base if old.tree.base is not None else old.tree
+                tree = kdtree_overlay.overlay(device, base, triangles, tree_rows, should_stop)
+            else:
+                tree = kdtree.build(device, triangles, should_stop)
         with timer.stage("upload"):
             geometry = (tree, device.to_device(float4_rows(scene.normals.reshape(-1, 3))),
                         device.to_device(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),

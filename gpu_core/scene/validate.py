@@ -4,10 +4,11 @@ make an image)."""
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 
+from ..device.layout import rows_differ
 from ..errors import SceneError
 from .model import Camera, Lights, Materials, Scene, ValidationReport
 
@@ -53,7 +54,10 @@ _GEOMETRY_COUNTS = ("dropped_nonfinite_triangles", "dropped_degenerate_triangles
 
 class GeometryMemo:
     """The checked geometry of the last scene validated with it, and the
-    repairs counted, keyed by its arrays (by identity) and material count."""
+    repairs counted, keyed by its arrays (by identity) and material count.
+    A scene whose arrays are new but of the same shapes (an object moved or
+    reshaped in place) has only its rows that differ checked, where neither
+    the last scene nor those rows needed a repair."""
 
     def __init__(self):
         self._key: tuple = ()
@@ -65,21 +69,58 @@ class GeometryMemo:
         key = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.tangents, len(scene.materials))
         if not (len(key) == len(self._key) and all(a is b for a, b in zip(key[:5], self._key[:5]))
                 and key[5] == self._key[5]):
-            counted = ValidationReport()
-            tris, normals, uvs, mat_ids, tangents, cross = _valid_triangles(scene, counted)
-            materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, counted)
-            normals = _repaired_normals(normals, cross, counted).astype(np.float32)
-            uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
-            # a corner tangent that is not finite is no tangent (the triangle's UVs give one)
-            tangents = np.where(np.isfinite(tangents).all(axis=-1, keepdims=True), tangents, 0.0).astype(np.float32)
-            counts = {name: getattr(counted, name) for name in _GEOMETRY_COUNTS}
-            self._key = key
-            self._result = (tris, normals, uvs, mat_ids.astype(np.int32), tangents, materials is not scene.materials,
-                            counts)
+            rows = self._changed_rows(key)
+            result = self._patched(scene, rows) if rows is not None else None
+            self._key, self._result = key, result or _checked_geometry(scene)
         *geometry, counts = self._result
         for name, value in counts.items():
             setattr(report, name, value)
         return tuple(geometry)
+
+    def _changed_rows(self, key: tuple) -> np.ndarray | None:
+        """The triangle rows where ``key``'s arrays differ from the last
+        scene's, when only those need checking: the last scene needed no
+        repair, and every array has its shape and type."""
+        if not self._result or any(self._result[-1].values()) or self._result[5] or key[5] != self._key[5]:
+            return None
+        arrays = [np.asarray(a) for a in key[:5]]
+        if any(a.ndim == 0 or a.shape != b.shape or a.dtype != b.dtype for a, b in zip(arrays, self._key[:5])):
+            return None
+        changed = np.zeros(len(arrays[0]), bool)
+        for new, old in zip(arrays, self._key[:5]):
+            if new.size:
+                changed |= rows_differ(new, old)
+        return np.flatnonzero(changed)
+
+    def _patched(self, scene: Scene, rows: np.ndarray) -> tuple | None:
+        """The last result with ``rows`` checked again and written in, or
+        None where one of them needs a repair (the whole scene is checked)."""
+        has_tangents = np.size(scene.tangents) > 0
+        part = replace(scene, triangles=scene.triangles[rows], normals=scene.normals[rows], uvs=scene.uvs[rows],
+                       material_ids=scene.material_ids[rows],
+                       tangents=scene.tangents[rows] if has_tangents else scene.tangents)
+        *checked, needs_default, counts = _checked_geometry(part)
+        if needs_default or any(counts.values()):
+            return None
+        geometry = [array.copy() for array in self._result[:5]]
+        for whole, rows_checked in zip(geometry, checked):
+            if len(whole):
+                whole[rows] = rows_checked
+        return (*geometry, False, counts)
+
+
+def _checked_geometry(scene: Scene) -> tuple:
+    """(triangles, normals, uvs, material ids, corner tangents, whether a
+    default material is needed, the repairs counted) of ``scene``."""
+    counted = ValidationReport()
+    tris, normals, uvs, mat_ids, tangents, cross = _valid_triangles(scene, counted)
+    materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, counted)
+    normals = _repaired_normals(normals, cross, counted).astype(np.float32)
+    uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
+    # a corner tangent that is not finite is no tangent (the triangle's UVs give one)
+    tangents = np.where(np.isfinite(tangents).all(axis=-1, keepdims=True), tangents, 0.0).astype(np.float32)
+    counts = {name: getattr(counted, name) for name in _GEOMETRY_COUNTS}
+    return (tris, normals, uvs, mat_ids.astype(np.int32), tangents, materials is not scene.materials, counts)
 
 
 def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
@@ -94,13 +135,19 @@ def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
     given = scene.tangents
     tangents = (np.zeros((0, 3, 4), np.float32) if given is None or np.size(given) == 0
                 else _shaped(given, (n, 3, 4), np.float32))
-    finite = np.isfinite(tris).all(axis=(1, 2))
+    finite = np.isfinite(tris).reshape(n, 9).all(axis=1)
     report.dropped_nonfinite_triangles = int((~finite).sum())
+    # column by column (numpy reduces short rows slowly): the cross product
+    # of two edges, the longest edge and the largest coordinate
     with np.errstate(invalid="ignore", over="ignore"):
-        cross = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-        area2 = np.linalg.norm(cross, axis=1)
-        longest = np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2).max(axis=1)
-        extent = np.abs(tris).max(axis=(1, 2))
+        e1, e2, e3 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0], tris[:, 2] - tris[:, 1]
+        cross = np.empty((n, 3))
+        for k in range(3):
+            i, j = (k + 1) % 3, (k + 2) % 3
+            cross[:, k] = e1[:, i] * e2[:, j] - e1[:, j] * e2[:, i]
+        area2 = np.sqrt(_squared_lengths(cross))
+        longest = np.sqrt(np.maximum(np.maximum(_squared_lengths(e1), _squared_lengths(e2)), _squared_lengths(e3)))
+        extent = np.maximum.reduce([np.abs(tris[:, c, k]) for c in range(3) for k in range(3)])
         # zero area: a sliver thinner than 1e-12 of its length, or a cross
         # product no larger than the rounding of coordinates this far out
         noise = 64.0 * np.finfo(np.float64).eps * extent * longest
@@ -122,15 +169,23 @@ def _valid_material_ids(materials: Materials, mat_ids: np.ndarray, report: Valid
 
 def _repaired_normals(normals: np.ndarray, cross: np.ndarray, report: ValidationReport) -> np.ndarray:
     """Unit corner normals; non-finite or zero ones become the face normal."""
-    face_n = (cross / np.linalg.norm(cross, axis=1, keepdims=True)).astype(np.float32)
     normals64 = normals.astype(np.float64)  # float32 squares overflow above ~1e19
     with np.errstate(invalid="ignore", over="ignore"):
-        length = np.linalg.norm(normals64, axis=2)
-    bad_normals = ~(np.isfinite(normals64).all(axis=2) & (length > 1e-12))
+        length = np.sqrt(_squared_lengths(normals64.reshape(-1, 3))).reshape(normals.shape[:2])
+    # a non-finite component makes the length NaN or infinite
+    bad_normals = ~(np.isfinite(length) & (length > 1e-12))
     report.repaired_normals = int(bad_normals.any(axis=1).sum())
     with np.errstate(invalid="ignore"):
         scaled = normals64 / np.where(bad_normals, 1.0, length)[..., None]
-        return np.where(bad_normals[..., None], face_n[:, None, :], scaled)
+    if not report.repaired_normals:
+        return scaled
+    face_n = cross / np.sqrt(_squared_lengths(cross))[:, None]
+    return np.where(bad_normals[..., None], face_n[:, None, :], scaled)
+
+
+def _squared_lengths(vectors: np.ndarray) -> np.ndarray:
+    """|v|^2 of (N, 3) vectors, column by column."""
+    return vectors[:, 0] * vectors[:, 0] + vectors[:, 1] * vectors[:, 1] + vectors[:, 2] * vectors[:, 2]
 
 
 def _valid_lights(lights: Lights, report: ValidationReport, warnings: list[str]) -> Lights:

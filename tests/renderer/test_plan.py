@@ -174,9 +174,51 @@ def test_the_triangles_bounds_are_kept_while_the_geometry_is():
     assert kept.triangle_bounds is first.triangle_bounds
     shifted = scene_tables(validate(room(shift=-0.5)), first, {"geometry"})
     np.testing.assert_array_equal(shifted.triangle_bounds[0], [-1.5, -1, -1])
-    assert not np.array_equal(shifted.center, first.center)
+    # the frame stays while the bounds' centre moves a little (0.25 of a 1.9 half-diagonal)...
+    assert shifted.center is first.center
+    lo, hi = np.array([-1.5, -1, -1]), np.array([1.0, 1, 1])  # the bounding sphere still holds the scene
+    assert shifted.radius >= np.linalg.norm(np.maximum(hi - shifted.center, shifted.center - lo)) > first.radius
+    # ... and follows them further (1.5 of 2.9)
+    far_wall = scene_tables(validate(room(shift=-3.0)), first, {"geometry"})
+    np.testing.assert_array_equal(far_wall.center, [-1.5, 0, 0])
     # a light moved out of the box widens the bounds without reading the triangles again
     far = room()
     far.lights.position[0] = (0.0, 0.0, 5.0)
     lit = scene_tables(validate(far), first, {"lights"})
     assert lit.triangle_bounds is first.triangle_bounds and lit.center[2] == 2.0
+
+
+def test_a_move_of_few_triangles_is_overlaid_on_the_tree_held():
+    held = dataclasses.replace(held_after(room(), GI), tree_base=validate(room()).triangles.copy())
+    moved_wall = plan(validate(room(shift=0.1)), GI, held)
+    assert "kdtree_overlay" in moved_wall.stages and "kdtree" not in moved_wall.stages
+    assert len(moved_wall.tree_rows) == 2 and "2 of 12 triangles moved" in moved_wall.reuse["kdtree"]
+    assert moved_wall.traces_photons  # the light paths still change
+
+
+def test_a_move_of_many_triangles_or_of_the_frame_builds_the_whole_tree():
+    held = dataclasses.replace(held_after(room(), GI), tree_base=validate(room()).triangles.copy())
+    # the frame moves with the scene's bounds: every triangle is uploaded again
+    assert "kdtree" in plan(validate(room(shift=-3.0)), GI, held).stages
+    # past the overlay's share (a quarter of the triangles): a wall's two and the mirror's two of 14
+    base = validate(room(mirror=True)).triangles.copy()
+    moved = room(mirror=True, shift=0.1)
+    moved.triangles[-2:, :, 2] += 0.01
+    shared = dataclasses.replace(held_after(room(mirror=True), GI), tree_base=base)
+    many = plan(validate(moved), GI, shared)
+    assert "kdtree" in many.stages and (many.tables.center == shared.tables.center).all()
+    moved.triangles[-2:, :, 2] -= 0.01  # the wall alone: 2 of 14
+    assert "kdtree_overlay" in plan(validate(moved), GI, shared).stages
+
+
+def test_an_overlaid_tree_renders_what_a_tree_built_afresh_renders(device):
+    renderer = Renderer(device)
+    renderer.render(room(mirror=True), GI)
+    overlaid = renderer.render(room(mirror=True, shift=0.1), GI)
+    fresh = Renderer(device).render(room(mirror=True, shift=0.1), GI)
+    assert "kdtree_overlay" in overlaid.stats["plan"] and "kdtree" in fresh.stats["plan"]
+    assert overlaid.stats["kdtree"]["overlay_triangles"] == 2
+    np.testing.assert_allclose(overlaid.passes["Combined"], fresh.passes["Combined"], rtol=1e-5, atol=1e-6)
+    # moved back: the base tree alone again
+    back = renderer.render(room(mirror=True), GI)
+    assert "kdtree_overlay" in back.stats["plan"] and "overlay_triangles" not in back.stats["kdtree"]

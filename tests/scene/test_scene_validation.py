@@ -1,6 +1,7 @@
 """gpu_core.scene.validate: every bad input is dropped or repaired, counted and described."""
 
 import dataclasses
+import sys
 
 import numpy as np
 import pytest
@@ -346,3 +347,42 @@ def test_a_scene_with_the_same_geometry_arrays_is_not_checked_again_but_its_repa
     moved = dataclasses.replace(first, triangles=first.triangles + 1.0)
     assert validate(moved, memo).triangles is not checked.triangles  # new arrays: checked again
     np.testing.assert_array_equal(validate(moved, memo).triangles, checked.triangles + 1.0)
+
+
+def _clean_pair():
+    """Two quads, and the same with the second moved, given new arrays."""
+    tris = np.concatenate([quad((0, 0, 0), 1.0), quad((2, 0, 0), 1.0)])
+    first = _scene(tris)
+    tris = first.triangles.copy()
+    tris[2:] += (0.0, 0.5, 0.25)
+    return first, dataclasses.replace(first, triangles=tris, normals=first.normals.copy())
+
+
+def test_a_moved_part_of_a_clean_scene_is_checked_alone_and_gives_what_a_whole_check_gives(monkeypatch):
+    first, moved = _clean_pair()
+    memo = GeometryMemo()
+    checked = validate(first, memo)
+    module = sys.modules[GeometryMemo.__module__]
+    sizes, check = [], module._checked_geometry
+    monkeypatch.setattr(module, "_checked_geometry", lambda scene: sizes.append(len(scene.triangles)) or check(scene))
+    patched, whole = validate(moved, memo), validate(moved)
+    assert sizes == [2, 4]  # the memo checked the moved quad's two triangles
+    for name in ("triangles", "normals", "uvs", "material_ids", "tangents"):
+        np.testing.assert_array_equal(getattr(patched, name), getattr(whole, name), err_msg=name)
+        assert not np.shares_memory(getattr(patched, name), getattr(checked, name)) or not getattr(patched, name).size
+    np.testing.assert_array_equal(checked.triangles, first.triangles)  # the last result is not written into
+    assert patched.report.as_stats() == dict.fromkeys(patched.report.as_stats(), 0)
+
+
+def test_a_moved_part_that_needs_a_repair_is_checked_with_the_whole_scene():
+    first, moved = _clean_pair()
+    memo = GeometryMemo()
+    validate(first, memo)
+    moved.triangles[3, 0, 0] = np.nan  # the moved quad's second triangle
+    moved.normals[2] = 0.0
+    patched = validate(moved, memo)
+    assert patched.report.dropped_nonfinite_triangles == 1 and patched.report.repaired_normals == 1
+    assert len(patched.triangles) == 3
+    # and a clean move after a scene that needed repairs: the whole scene again
+    again = dataclasses.replace(moved, triangles=moved.triangles.copy())
+    assert validate(again, memo).report.dropped_nonfinite_triangles == 1
