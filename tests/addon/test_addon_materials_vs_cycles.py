@@ -207,9 +207,11 @@ def display(linear: np.ndarray) -> np.ndarray:
     return np.where(y <= 0.0031308, 12.92 * y, 1.055 * np.power(y, 1 / 2.4) - 0.055)
 
 
-def compare(bpy, tmp_path, material, lighting) -> tuple[np.ndarray, float]:
-    """Per-channel mean ratio GPU GI / Cycles and the display RMSE."""
+def compare(bpy, tmp_path, material, lighting, boost: int = 1) -> tuple[np.ndarray, float]:
+    """Per-channel mean ratio GPU GI / Cycles and the display RMSE, both
+    renderers at ``boost`` times their samples."""
     scene = _scene(bpy, material, lighting)
+    scene.cycles.samples, scene.gpugi.samples = CYCLES_SAMPLES * boost, GPUGI_SAMPLES * boost
     ours = render_to_array(bpy, scene, "GPUGI", str(tmp_path / "gpugi.exr"))[..., :3].astype(np.float64)
     assert not LAST_RUN.get("error") and not LAST_RUN.get("warnings"), LAST_RUN
     theirs = render_to_array(bpy, scene, "CYCLES", str(tmp_path / "cycles.exr"))[..., :3].astype(np.float64)
@@ -218,12 +220,22 @@ def compare(bpy, tmp_path, material, lighting) -> tuple[np.ndarray, float]:
     return ours.mean(axis=(0, 1)) / theirs.mean(axis=(0, 1)), float(np.sqrt(((a - b) ** 2).mean()) / b.mean())
 
 
-# Known gaps (README, Looks and units), measured: the point light seen
-# through glass or in a near-mirror highlight (roughness 0.05) is a caustic
-# that the two renderers' samples disagree on pixel by pixel (rough glass under
-# the point light: mean 0.91-1.05 of Cycles, display RMSE 0.5-2.5).
-KNOWN_GAPS = {("glass_r0.1", "point"), ("glass_r0.5", "point"), ("glass_node", "point"),
-              ("metal_r0.05", "point"), ("plastic_r0.05", "point")}
+# The near-mirror highlight of a small light is a few very bright pixels
+# that both renderers find by chance: at the samples above two renders of
+# either one with different seeds differ by more than the tolerance (metal
+# roughness 0.05: display RMSE 0.19 between two Cycles renders, 0.22
+# between two of ours, 0.16 between ours and Cycles). These cases render
+# at NOISE_BOOST times the samples.
+NOISE_LIMITED = {("metal_r0.05", "point"), ("plastic_r0.05", "point")}
+NOISE_BOOST = 16
+# Known gaps (README, Looks and units), measured: rough glass under the
+# point light is 2-5% darker than Cycles at any sample count. Cycles
+# evaluates refraction through microfacets that face away from one of the
+# two directions (its microfacet eval has no such check; pbrt-v3 added the
+# one that GPU GI keeps, its issue #228), which adds light that its own
+# sampling never produces; GPU GI with the check removed came within 0-1.5%
+# of Cycles (rough white glass, IOR 1.5) and from 0.18 to 1.08 at IOR 1.05.
+KNOWN_GAPS = {("glass_r0.1", "point"), ("glass_r0.5", "point"), ("glass_node", "point")}
 CASES = [pytest.param(material, lighting, marks=pytest.mark.xfail(strict=True, reason="known gap"))
          if (material, lighting) in KNOWN_GAPS else (material, lighting)
          for material in MATERIALS for lighting in ("point", "world")]
@@ -233,7 +245,8 @@ CASES = [pytest.param(material, lighting, marks=pytest.mark.xfail(strict=True, r
 @pytest.mark.slow
 @pytest.mark.parametrize("material, lighting", CASES)
 def test_sphere_material_matches_cycles(bpy_empty, tmp_path, material, lighting):
-    ratio, error = compare(bpy_empty, tmp_path, material, lighting)
+    boost = NOISE_BOOST if (material, lighting) in NOISE_LIMITED else 1
+    ratio, error = compare(bpy_empty, tmp_path, material, lighting, boost)
     print(f"{material} {lighting}: mean ratio {np.round(ratio, 3)}, display RMSE {error:.3f}")
     np.testing.assert_allclose(ratio, 1.0, atol=MEAN_TOLERANCE)
     assert error < DISPLAY_TOLERANCE
