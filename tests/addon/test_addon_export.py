@@ -342,6 +342,19 @@ def test_rough_diffuse_is_exported_and_thin_film_named_in_the_warnings(bpy):
     assert not any("Roughness" in w for w in scene.warnings)
 
 
+@pytest.mark.parametrize("kind, distribution", [("ShaderNodeBsdfPrincipled", "GGX"),
+                                                 ("ShaderNodeBsdfGlossy", "BECKMANN"),
+                                                 ("ShaderNodeBsdfGlass", "GGX")])
+def test_a_distribution_other_than_multiscatter_ggx_is_named_in_the_warnings(bpy, kind, distribution):
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    mat, node = _material(bpy, kind)
+    bpy.context.object.data.materials.append(mat)
+    assert not any("distribution" in w for w in _export(bpy).warnings)  # Multiscatter GGX, the default
+    node.distribution = distribution
+    warned = [w for w in _export(bpy).warnings if "distribution" in w]
+    assert len(warned) == 1 and node.name in warned[0] and "Multiscatter GGX" in warned[0]
+
+
 def test_a_bump_node_on_normal_is_named_in_the_warnings(bpy):
     bpy.ops.mesh.primitive_plane_add(size=1)
     mat, node = _material(bpy, "ShaderNodeBsdfPrincipled")
