@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from gpu_core.accel import kdtree, kdtree_overlay
 from test_kdtree_queries import (assert_any_hits, assert_closest_hits, boxes, random_rays, random_soup,
@@ -107,3 +109,22 @@ def test_an_overlay_keeps_the_tree_statistics_honest(device, soup_base):
     assert np.isnan(nodes["split"][0]) and nodes["child"][0] == base.stats["nodes"] + 1
     assert len(leaf_tris) == tree.stats["leaf_references"]
     assert tree.stats["depth"] <= kdtree.MAX_DEPTH
+
+
+@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(count=st.integers(2, 400), share=st.floats(0.0, kdtree_overlay.OVERLAY_SHARE), seed=st.integers(0, 2**31),
+       scale=st.sampled_from([1e-3, 1.0, 1e3]), shift=st.sampled_from([0.01, 0.5, 3.0]))
+def test_random_moves_hit_like_brute_force(device, count, share, seed, scale, shift):
+    # soups at several scales (in the device frame: the renderer centres the scene), a random
+    # part of them moved near or far
+    rng = np.random.default_rng(seed)
+    tris = (random_soup(count, seed=seed % 1000, size=0.2) * scale).astype(np.float32)
+    base = kdtree.build(device, tris)
+    rows = np.sort(rng.choice(count, int(share * count), replace=False)).astype(np.int32)
+    now = moved(tris, rows, rng.normal(size=3) * shift * scale)
+    assert (kdtree_overlay.moved_rows(tris, now) == rows).all()
+    tree = kdtree_overlay.overlay(device, base, now, rows)
+    org, dirs = rays_at(now, 300, seed=seed % 997)
+    assert_closest_hits(tree, now, org, dirs)
+    org, dirs = random_rays(300, seed=seed % 991, spread=1.5)
+    assert_closest_hits(tree, now, org * scale, dirs)
