@@ -175,8 +175,8 @@ class MaterialTable:
             return {**self._color(name, node.inputs["Color"]), "roughness": 1.0,
                     "diffuse_roughness": self._value(name, node.inputs["Roughness"]), **self._normal(name, node)}
         if kind in _GLOSSY:
-            self._distribution(name, node)
             return {
+                **self._distribution(name, node),
                 **self._color(name, node.inputs["Color"]),
                 "shader": MATERIAL_GLOSSY,
                 "metallic": 1.0,
@@ -185,8 +185,8 @@ class MaterialTable:
                 **self._anisotropy(name, node, "Anisotropy", "Rotation"),
             }
         if kind == "ShaderNodeBsdfGlass":
-            self._distribution(name, node)
             return {
+                **self._distribution(name, node),
                 **self._color(name, node.inputs["Color"]),
                 "shader": MATERIAL_GLASS,
                 "transmission": 1.0,
@@ -208,8 +208,8 @@ class MaterialTable:
             socket = inputs.get(socket_name)
             if socket is not None and (socket.is_linked or socket.default_value > 0.0):
                 self._warn(f"material '{name}': the Principled BSDF {layer} layer is not supported; left out")
-        self._distribution(name, node)
         return {
+            **self._distribution(name, node),
             **self._color(name, inputs["Base Color"]),
             **self._texture_value(name, inputs["Metallic"], "metallic"),
             **self._texture_value(name, inputs["Roughness"], "roughness"),
@@ -225,14 +225,18 @@ class MaterialTable:
             **self._anisotropy(name, node, "Anisotropic", "Anisotropic Rotation"),
         }
 
-    def _distribution(self, name: str, node) -> None:
-        """Name a microfacet distribution other than Multiscatter GGX (the
-        one the kernels model) in the warnings."""
+    def _distribution(self, name: str, node) -> dict:
+        """The row field of a shader's microfacet distribution: GGX keeps
+        single scattering only; Beckmann and Ashikhmin-Shirley are named in
+        the warnings and render as Multiscatter GGX."""
         distribution = getattr(node, "distribution", "MULTI_GGX")
+        if distribution == "GGX":
+            return {"single_scatter": 1}
         if distribution != "MULTI_GGX":
             label = node.bl_rna.properties["distribution"].enum_items[distribution].name
             self._warn(f"material '{name}': the {label} distribution of {node.name} is not supported; "
                        "rendered as Multiscatter GGX")
+        return {}
 
     def _anisotropy(self, name: str, node, amount: str, rotation: str) -> dict:
         """Row fields of a shader's anisotropy (its ``amount`` and

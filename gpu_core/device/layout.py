@@ -96,7 +96,8 @@ MATERIAL = Struct("Material", "a material row (shading/bsdf.h)", [
     ("aniso_y", "float", "and along the bitangent"),
     ("aniso_rotation", "float", "the tangent turned about the normal, in turns"),
     ("diffuse_roughness", "float", "the diffuse lobe's Oren-Nayar roughness (0: Lambert)"),
-    ("pad", "int", "", 3),
+    ("single_scatter", "int", "1: GGX without Multiscatter GGX's energy compensation (Cycles' GGX distribution)"),
+    ("pad", "int", "", 2),
 ])
 
 LIGHT = Struct("Light", "a light row; derived values are computed on the host in float64", [

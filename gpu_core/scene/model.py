@@ -65,6 +65,9 @@ class Materials:
     anisotropy: np.ndarray
     anisotropic_rotation: np.ndarray  # (M,) float32, in turns about the normal
     diffuse_roughness: np.ndarray  # (M,) float32: Principled's Diffuse Roughness or the Diffuse node's (Oren-Nayar)
+    # (M,) int32: 1 where the shader's distribution is GGX, whose lobes lose
+    # the energy of multiple scattering (0: Multiscatter GGX, Blender's default)
+    single_scatter: np.ndarray
     names: list[str] = field(default_factory=list)
 
     @staticmethod
@@ -96,6 +99,7 @@ class Materials:
             anisotropy=0.0,
             anisotropic_rotation=0.0,
             diffuse_roughness=0.0,
+            single_scatter=0,
             name="",
         )
         rows = [{**defaults, **row} for row in rows] or [dict(defaults, name="default")]

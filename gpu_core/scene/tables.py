@@ -127,6 +127,7 @@ def material_table(scene: Scene) -> np.ndarray:
     table["aniso_x"], table["aniso_y"] = anisotropic_scales(shader, m.anisotropy)
     table["aniso_rotation"] = np.nan_to_num(m.anisotropic_rotation) % 1.0
     table["diffuse_roughness"] = np.clip(np.nan_to_num(m.diffuse_roughness), 0.0, 1.0)
+    table["single_scatter"] = (m.single_scatter != 0).astype(np.int32)
     level = np.where(shader == MATERIAL_PRINCIPLED, np.clip(np.nan_to_num(m.specular_ior_level), 0.0, 1e3), 0.0)
     tint = np.clip(np.nan_to_num(m.specular_tint, nan=1.0), 0.0, 1e3)
     table["specular_tint"][:, :3] = tint

@@ -231,8 +231,10 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
     if (fabs(f.spec_eta - 1.0f) < 1e-5f) f.w_specular = 0.0f;
     f.spec_ms = one;
     float layer = 1.0f;
+    if (m->single_scatter) /* GGX: the lobes keep only what single scattering reflects */
+        f.metal_ms = f.glass_ms = one;
     if (f.w_specular > 0.0f) {
-        f.spec_ms = Microfacet_multiscatter(f.rough, mu, m->specular_fss.xyz);
+        f.spec_ms = m->single_scatter ? one : Microfacet_multiscatter(f.rough, mu, m->specular_fss.xyz);
         float3 albedo = Microfacet_E(f.rough, mu) * f.spec_ms * mix(f.spec_f0, one, Microfacet_S(f.rough, mu, f.spec_eta));
         layer = clamp(1.0f - fmax(fmax(albedo.x, albedo.y), albedo.z), 0.0f, 1.0f);
     }

@@ -342,14 +342,26 @@ def test_rough_diffuse_is_exported_and_thin_film_named_in_the_warnings(bpy):
     assert not any("Roughness" in w for w in scene.warnings)
 
 
-@pytest.mark.parametrize("kind, distribution", [("ShaderNodeBsdfPrincipled", "GGX"),
-                                                 ("ShaderNodeBsdfGlossy", "BECKMANN"),
-                                                 ("ShaderNodeBsdfGlass", "GGX")])
-def test_a_distribution_other_than_multiscatter_ggx_is_named_in_the_warnings(bpy, kind, distribution):
+@pytest.mark.parametrize("kind", ["ShaderNodeBsdfPrincipled", "ShaderNodeBsdfGlossy", "ShaderNodeBsdfGlass"])
+def test_the_ggx_distribution_exports_single_scattering(bpy, kind):
     bpy.ops.mesh.primitive_plane_add(size=1)
     mat, node = _material(bpy, kind)
     bpy.context.object.data.materials.append(mat)
-    assert not any("distribution" in w for w in _export(bpy).warnings)  # Multiscatter GGX, the default
+    m = _export(bpy).materials
+    assert m.single_scatter[m.names.index(kind)] == 0  # Multiscatter GGX, the default
+    node.distribution = "GGX"
+    scene = _export(bpy)
+    m = scene.materials
+    assert m.single_scatter[m.names.index(kind)] == 1 and not any("distribution" in w for w in scene.warnings)
+
+
+@pytest.mark.parametrize("kind, distribution", [("ShaderNodeBsdfGlossy", "BECKMANN"),
+                                                 ("ShaderNodeBsdfGlossy", "ASHIKHMIN_SHIRLEY"),
+                                                 ("ShaderNodeBsdfGlass", "BECKMANN")])
+def test_other_distributions_are_named_in_the_warnings(bpy, kind, distribution):
+    bpy.ops.mesh.primitive_plane_add(size=1)
+    mat, node = _material(bpy, kind)
+    bpy.context.object.data.materials.append(mat)
     node.distribution = distribution
     warned = [w for w in _export(bpy).warnings if "distribution" in w]
     assert len(warned) == 1 and node.name in warned[0] and "Multiscatter GGX" in warned[0]

@@ -35,6 +35,7 @@ MATERIALS = {
     "metal_anisotropic": {"metallic": 1.0, "roughness": 0.4, "Anisotropic": 0.8, "Anisotropic Rotation": 0.1},
     "plastic_anisotropic": {"roughness": 0.3, "Anisotropic": 1.0},
     "glossy_node_anisotropic": dict(node="ShaderNodeBsdfGlossy", roughness=0.4, Anisotropy=-0.5),
+    "metal_r0.7_ggx": dict(metallic=1.0, roughness=0.7, distribution="GGX"),
     "diffuse_rough": {"roughness": 0.5, "Diffuse Roughness": 0.8},
     "diffuse_node_rough": dict(node="ShaderNodeBsdfDiffuse", roughness=1.0),
     "textured": dict(textured="values"),
@@ -138,9 +139,11 @@ def _material(bpy, name, spec):
     if "mixed" in spec:
         return _mixed(bpy, mat, spec["mixed"])
     node_kind = spec.pop("node", None)
+    distribution = spec.pop("distribution", None)
     if node_kind is None:
         node = tree.nodes["Principled BSDF"]
         node.inputs["Base Color"].default_value = BASE
+        node.distribution = distribution or node.distribution
         for key, value in spec.items():
             socket = {"roughness": "Roughness", "metallic": "Metallic", "transmission": "Transmission Weight"}.get(key, key)
             node.inputs[socket].default_value = value

@@ -182,6 +182,42 @@ def test_clear_glass_keeps_all_the_energy(device, roughness, ior):
             np.testing.assert_allclose(a, 1.0, atol=0.03)
 
 
+def ggx_albedo(alpha: float, cos_theta: float, steps: int = 1000) -> float:
+    """Directional albedo of white single-scattering GGX (height-correlated
+    Smith), by the midpoint rule over cos(theta) and phi."""
+    c = (np.arange(steps) + 0.5) / steps
+    phi = (np.arange(steps) + 0.5) / steps * 2 * np.pi
+    c, phi = np.meshgrid(c, phi, indexing="ij")
+    s = np.sqrt(1 - c**2)
+    wi = np.stack([s * np.cos(phi), s * np.sin(phi), c], -1)
+    wo = np.array([np.sqrt(1 - cos_theta**2), 0.0, cos_theta])
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    a2 = alpha**2
+    d = a2 / (np.pi * (1 + (a2 - 1) * h[..., 2] ** 2) ** 2)
+    lam = lambda x: (np.sqrt(1 + a2 * (1 - x * x) / (x * x)) - 1) / 2  # noqa: E731
+    g = 1 / (1 + lam(cos_theta) + lam(c))
+    return float((d * g / (4 * cos_theta)).mean() * 2 * np.pi)
+
+
+@pytest.mark.parametrize("roughness", [0.3, 0.7, 1.0])
+@pytest.mark.parametrize("cos_theta", [1.0, 0.5])
+def test_the_ggx_distribution_keeps_single_scattering_only(device, roughness, cos_theta):
+    # Cycles' GGX (not Multiscatter GGX): a white metal reflects the single-scattering albedo
+    single = albedo(device, material(base_color=(1, 1, 1), metallic=1.0, roughness=roughness, single_scatter=1),
+                    cos_theta)
+    np.testing.assert_allclose(single, ggx_albedo(roughness**2, cos_theta), atol=0.01)
+
+
+def test_ggx_glass_loses_what_multiple_scattering_gives_back(device):
+    def white(roughness, single):
+        return material(base_color=(1, 1, 1), transmission=1.0, ior=1.5, roughness=roughness,
+                        single_scatter=int(single))
+    np.testing.assert_allclose(albedo(device, white(0.05, True), 1.0), 1.0, atol=0.02)
+    assert (albedo(device, white(1.0, True), 0.5) < 0.95).all()
+    np.testing.assert_allclose(albedo(device, white(1.0, False), 0.5), 1.0, atol=0.03)
+
+
 def test_metal_colour_comes_through_multiple_scattering_saturated(device):
     # F_ms: light bouncing between coloured microfacets is tinted more than once
     rough = albedo(device, material(base_color=(0.9, 0.5, 0.2), metallic=1.0, roughness=1.0), 0.7)
