@@ -25,7 +25,7 @@ from ..device.timer import StageTimer
 from ..errors import SceneError
 from .kdtree_build import build_tree
 
-__all__ = ["KdTree", "build", "corner_rows", "LEAF", "MAX_DEPTH", "NODE_DTYPE", "SELF_HIT_SCALE"]
+__all__ = ["KdTree", "build", "LEAF", "MAX_DEPTH", "NODE_DTYPE", "SELF_HIT_SCALE"]
 
 _PROGRAM = "accel/kdtree_query.cl"
 

@@ -16,11 +16,11 @@ from typing import Callable
 
 import numpy as np
 
-from ..device import Device
+from ..device import Device, primitives
 from ..device.constants import KD_MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE, rows_differ
 from ..device.timer import StageTimer
-from .kdtree import KdTree, build, corner_rows
+from .kdtree import KdTree, build
 from .kdtree_build import depth_limit
 
 PROGRAM = "accel/kdtree_overlay.cl"
@@ -47,22 +47,26 @@ def moved_rows(base_triangles: np.ndarray | None, triangles: np.ndarray) -> np.n
     return rows if len(rows) <= OVERLAY_SHARE * count else None
 
 
-def overlay(device: Device, base: KdTree, triangles: np.ndarray, rows: np.ndarray,
+def overlay(device: Device, base: KdTree, rows: np.ndarray, moved_triangles: np.ndarray,
             should_stop: Callable[[], bool] | None = None) -> KdTree:
-    """The base tree joined with a tree over ``triangles[rows]`` (``(N, 3, 3)``
-    float32, the scene's triangles now; the others are where the base has
-    them). With no rows, the base itself."""
+    """The base tree joined with a tree over the triangles ``rows``, which
+    moved to ``moved_triangles`` (``(len(rows), 3, 3)`` float32; the others
+    are where the base has them). With no rows, the base itself."""
     if len(rows) == 0:
         return base
     rows = np.asarray(rows, np.int32)
-    tris = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
+    count = base.triangle_count
     timer = StageTimer()
-    over = build(device, tris[rows], should_stop)
+    over = build(device, np.asarray(moved_triangles, np.float32).reshape(-1, 3, 3), should_stop)
     with timer.stage("join"):
-        verts = device.array_from(corner_rows(tris))
+        # the corners now: the base's, the moved triangles' written over them on the device
+        verts = device.array(3 * count, base.verts.dtype)
+        device.copy(verts.data, base.verts.data, base.verts.nbytes)
+        corners = (3 * rows[:, None] + np.arange(3, dtype=np.int32)).ravel()
+        primitives.scatter_rows(device, over.verts.data, device.to_device(corners), len(corners), verts.data)
         nb, no = int(base.stats["nodes"]), int(over.stats["nodes"])
         base_refs, over_refs = int(base.stats["leaf_references"]), int(over.stats["leaf_references"])
-        moved = np.zeros(len(tris), np.uint8)
+        moved = np.zeros(count, np.uint8)
         moved[rows] = 1
         nodes = device.array(1 + nb + no, KDNODE_DTYPE)
         leaf_tris = device.array(base_refs + over_refs, np.int32)
@@ -79,4 +83,4 @@ def overlay(device: Device, base: KdTree, triangles: np.ndarray, rows: np.ndarra
     stats["ms"]["total"] = stats["ms"]["overlay_build"] + stats["ms"]["join"]
     return KdTree(device=device, nodes=nodes, leaf_tris=leaf_tris, verts=verts,
                   bmin=np.minimum(base.bmin, over.bmin), bmax=np.maximum(base.bmax, over.bmax),
-                  triangle_count=len(tris), stats=stats, base=base)
+                  triangle_count=count, stats=stats, base=base)

@@ -72,12 +72,12 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
     old = previous if not moved else None
     if old is None or "geometry" in changed:
         with timer.stage("kdtree"):
-            triangles = (scene.triangles - tables.center).astype(np.float32)
             if tree_rows is not None and old is not None:
                 base = old.tree.base if old.tree.base is not None else old.tree
-                tree = kdtree_overlay.overlay(device, base, triangles, tree_rows, should_stop)
+                moved = (scene.triangles[tree_rows] - tables.center).astype(np.float32)
+                tree = kdtree_overlay.overlay(device, base, tree_rows, moved, should_stop)
             else:
-                tree = kdtree.build(device, triangles, should_stop)
+                tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32), should_stop)
         with timer.stage("upload"):
             geometry = (tree, device.to_device(float4_rows(scene.normals.reshape(-1, 3))),
                         device.to_device(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),
