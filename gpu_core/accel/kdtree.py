@@ -122,12 +122,6 @@ class KdTree:
         return n, dev.to_device(org4), dev.to_device(dir4), dev.to_device(rng)
 
 
-def corner_rows(triangles: np.ndarray) -> np.ndarray:
-    """The corners of ``(N, 3, 3)`` triangles as the tracing kernels read
-    them: 3 float4 per triangle (``kd_verts``)."""
-    return float4_rows(np.asarray(triangles).reshape(-1, 3)).view(cltypes.float4).reshape(-1)
-
-
 def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool] | None = None) -> KdTree:
     """A kd-tree over ``triangles`` (``(N, 3, 3)`` float32), built on
     ``device``; ``should_stop`` is polled after every level of the build."""
@@ -138,7 +132,8 @@ def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool]
     timer = StageTimer()
     count = len(tris)
     with timer.stage("upload"):
-        verts_dev = device.array_from(corner_rows(tris) if count else np.zeros(3, cltypes.float4))
+        verts = float4_rows(tris.reshape(-1, 3)) if count else np.zeros((3, 4), np.float32)
+        verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
     with timer.stage("build"):
         out = build_tree(device, verts_dev, count, should_stop=should_stop)
     stats = dict(out.stats)

@@ -42,7 +42,7 @@ __kernel void KdOverlay_leaves(const __global int *base_tris, const int base_ref
     int i = get_global_id(0);
     if (i < base_refs) {
         int tri = base_tris[i];
-        out[i] = tri >= 0 && moved[tri] ? -1 : tri;
+        out[i] = moved[tri] ? -1 : tri;
     } else if (i < base_refs + over_refs) {
         out[i] = rows[over_tris[i - base_refs]];
     }

@@ -74,8 +74,8 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
         with timer.stage("kdtree"):
             if tree_rows is not None and old is not None:
                 base = old.tree.base if old.tree.base is not None else old.tree
-                moved = (scene.triangles[tree_rows] - tables.center).astype(np.float32)
-                tree = kdtree_overlay.overlay(device, base, tree_rows, moved, should_stop)
+                moved_tris = (scene.triangles[tree_rows] - tables.center).astype(np.float32)
+                tree = kdtree_overlay.overlay(device, base, tree_rows, moved_tris, should_stop)
             else:
                 tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32), should_stop)
         with timer.stage("upload"):

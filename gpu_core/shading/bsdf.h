@@ -216,23 +216,24 @@ inline Bsdf Bsdf_make(const Material *m, float3 base, float3 wo_world, float3 ns
         f.metal_b = mix(cc, one, x5) * (7.0f / (x5 * x)) * (one - fmin(tint, one));
         f_ss = mix(cc, one, 1.0f / 21.0f) - f.metal_b * (1.0f / 126.0f);
     }
-    f.metal_ms = f.w_metal > 0.0f ? Microfacet_multiscatter(f.rough, mu, clamp(f_ss, 0.0f, 1.0f)) : one;
+    /* GGX (single_scatter) keeps only what single scattering reflects; Multiscatter GGX gives the rest back */
+    f.metal_ms = f.w_metal > 0.0f && !m->single_scatter ? Microfacet_multiscatter(f.rough, mu, clamp(f_ss, 0.0f, 1.0f))
+                                                         : one;
     /* glass */
     f.glass_eta = entering ? m->ior : 1.0f / m->ior;
     bool glass_node = m->shader == MATERIAL_GLASS;
     f.glass_f0 = fmin((float3)(Microfacet_f0(m->ior)) * (glass_node ? one : tint), one);
     f.glass_rtint = glass_node ? c : one;
     f.glass_ttint = glass_node ? c : sqrt(cc);
-    f.glass_ms = f.w_glass > 0.0f ? Microfacet_glass_multiscatter(f.rough, mu, f.glass_eta, glass_node ? one : f.glass_ttint)
-                                  : one;
+    f.glass_ms = f.w_glass > 0.0f && !m->single_scatter
+                     ? Microfacet_glass_multiscatter(f.rough, mu, f.glass_eta, glass_node ? one : f.glass_ttint)
+                     : one;
     /* the specular layer and what it leaves the diffuse base */
     f.spec_eta = m->specular_tint.w;
     f.spec_f0 = fmin((float3)(Microfacet_f0(f.spec_eta)) * tint, one);
     if (fabs(f.spec_eta - 1.0f) < 1e-5f) f.w_specular = 0.0f;
     f.spec_ms = one;
     float layer = 1.0f;
-    if (m->single_scatter) /* GGX: the lobes keep only what single scattering reflects */
-        f.metal_ms = f.glass_ms = one;
     if (f.w_specular > 0.0f) {
         f.spec_ms = m->single_scatter ? one : Microfacet_multiscatter(f.rough, mu, m->specular_fss.xyz);
         float3 albedo = Microfacet_E(f.rough, mu) * f.spec_ms * mix(f.spec_f0, one, Microfacet_S(f.rough, mu, f.spec_eta));
