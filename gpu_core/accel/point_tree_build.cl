@@ -1,19 +1,22 @@
 /* Point kd-tree construction on the device [ZHWG08], breadth-first: every
  * kernel here handles all nodes (or chunks of points) of one tree level at
- * once; the host only loops over levels and reads list sizes.
+ * once; the host only loops over levels and reads one word of list sizes
+ * per level.
  *
  * Large-node stage: a node's points are a contiguous segment of the working
- * array, processed in chunks. Each level cuts off empty space or splits at
- * the spatial median of the cell's longest axis, then partitions the
- * segments stably. Small-node stage (<= POINT_BUILD_SMALL points): the small root's points
- * are fixed; a node is a bit mask over them, and the split is the candidate
- * plane (a point coordinate) of least VVH cost. Output stage: subtree
+ * array, processed in chunks of POINT_BUILD_CHUNK. Each level cuts off
+ * empty space or splits at the spatial median of the cell's longest axis,
+ * then partitions the segments stably. The host does not read the number
+ * of chunks: it launches the chunk kernels over a bound (n_active + n /
+ * POINT_BUILD_CHUNK) and they find the count on the device. Small-node
+ * stage (<= POINT_BUILD_SMALL points): the small root's points are fixed;
+ * a node is a bit mask over them, and the split is the candidate plane (a
+ * point coordinate) of least VVH cost. Output stage: subtree
  * sizes and photon sums bottom-up, preorder addresses top-down, then the
  * traversal nodes, node payloads and points in leaf order. */
 #include "device/axis.h"
 #include "accel/point_tree.h"
 
-#define BUILD_CHUNK 256
 /* axis value of a node whose points are all identical: split by count */
 #define BUILD_COUNT_SPLIT 4
 
@@ -37,12 +40,18 @@ inline void PointBuild_store_children(__global BuildNode *nodes, int id, int c0,
 
 /* ---- large-node stage ---------------------------------------------------- */
 
+/* Chunks of this level: chunk_end is the inclusive scan of the active
+ * nodes' chunk counts. */
+inline int PointBuild_chunk_total(const __global int *chunk_end, int n_active) {
+    return chunk_end[n_active - 1];
+}
+
 /* Number of chunks of each active node. */
 __kernel void PointBuild_chunk_counts(const __global int *active, const __global BuildNode *nodes,
                                  __global int *counts, const int n_active) {
     int j = get_global_id(0);
     if (j >= n_active) return;
-    counts[j] = (nodes[active[j]].count + BUILD_CHUNK - 1) / BUILD_CHUNK;
+    counts[j] = (nodes[active[j]].count + POINT_BUILD_CHUNK - 1) / POINT_BUILD_CHUNK;
 }
 
 /* The chunks of each active node; chunk_end is the inclusive scan of counts. */
@@ -57,8 +66,8 @@ __kernel void PointBuild_chunks(const __global int *active, const __global Build
     for (int c = 0; c < n; ++c) {
         Chunk ch;
         ch.slot = j;
-        ch.start = nd.start + c * BUILD_CHUNK;
-        ch.count = min(BUILD_CHUNK, nd.count - c * BUILD_CHUNK);
+        ch.start = nd.start + c * POINT_BUILD_CHUNK;
+        ch.count = min(POINT_BUILD_CHUNK, nd.count - c * POINT_BUILD_CHUNK);
         ch.rank = c;
         chunks[first + c] = ch;
     }
@@ -67,9 +76,9 @@ __kernel void PointBuild_chunks(const __global int *active, const __global Build
 /* Bounding box of each chunk's points. */
 __kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __global float4 *pts,
                                  __global float4 *chunk_lo, __global float4 *chunk_hi,
-                                 const int n_chunks) {
+                                 const __global int *chunk_end, const int n_active) {
     int c = get_global_id(0);
-    if (c >= n_chunks) return;
+    if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
     Chunk ch = chunks[c];
     float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
     for (int i = 0; i < ch.count; ++i) {
@@ -155,25 +164,41 @@ __kernel void PointBuild_large_decide(const __global int *active, __global Build
     nodes[id] = nd;
 }
 
-/* Points of each chunk that go to the left child. */
+/* Points of each chunk that go to the left child; 0 past the last chunk,
+ * up to the bound, so that the bound's prefix sums hold. */
 __kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __global int *active,
                                      const __global BuildNode *nodes, const __global float4 *pts,
-                                     __global int *chunk_left, const int n_chunks) {
+                                     __global int *chunk_left, const __global int *chunk_end,
+                                     const int n_active, const int bound) {
     int c = get_global_id(0);
-    if (c >= n_chunks) return;
+    if (c >= bound) return;
+    if (c >= PointBuild_chunk_total(chunk_end, n_active)) {
+        chunk_left[c] = 0;
+        return;
+    }
     Chunk ch = chunks[c];
     BuildNode nd = nodes[active[ch.slot]];
     int n = 0;
     for (int i = 0; i < ch.count; ++i)
-        n += PointBuild_goes_left(&nd, pts[ch.start + i], ch.rank * BUILD_CHUNK + i) ? 1 : 0;
+        n += PointBuild_goes_left(&nd, pts[ch.start + i], ch.rank * POINT_BUILD_CHUNK + i) ? 1 : 0;
     chunk_left[c] = n;
 }
 
-/* Create both children of every active node at child_base + 2 j;
- * left_end is the inclusive scan of the chunks' left counts. */
+/* Class of a new node as two counters in one long: low word 1 when it is
+ * large (split again), high word 1 when it is a small root; 0 for a leaf. */
+inline long PointBuild_class_flags(const BuildNode *nd, int max_depth) {
+    if (nd->depth >= max_depth) return 0;
+    if (nd->count > POINT_BUILD_SMALL) return 1;
+    return nd->count >= 2 ? ((long)1 << 32) : 0;
+}
+
+/* Create both children of every active node at child_base + 2 j, with
+ * their classes (PointBuild_class_flags); left_end is the inclusive scan of
+ * the chunks' left counts. */
 __kernel void PointBuild_large_split(const __global int *active, __global BuildNode *nodes,
                                 const __global int *chunk_end, const __global int *left_end,
-                                const int child_base, const int n_active) {
+                                const int child_base, const int max_depth, __global long *classes,
+                                const int n_active) {
     int j = get_global_id(0);
     if (j >= n_active) return;
     int id = active[j];
@@ -194,24 +219,28 @@ __kernel void PointBuild_large_split(const __global int *active, __global BuildN
     l.mask = r.mask = 0u;
     l.root = r.root = -1;
     PointBuild_store_children(nodes, id, child_base + 2 * j, l, r, nd.depth);
+    l.depth = r.depth = nd.depth + 1;
+    classes[2 * j] = PointBuild_class_flags(&l, max_depth);
+    classes[2 * j + 1] = PointBuild_class_flags(&r, max_depth);
 }
 
 /* Stable partition of each chunk's points into its node's two children. */
 __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __global int *active,
                                   const __global BuildNode *nodes, const __global float4 *pts,
                                   __global float4 *out, const __global int *chunk_left,
-                                  const __global int *left_end, const int n_chunks) {
+                                  const __global int *left_end, const __global int *chunk_end,
+                                  const int n_active) {
     int c = get_global_id(0);
-    if (c >= n_chunks) return;
+    if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
     Chunk ch = chunks[c];
     BuildNode nd = nodes[active[ch.slot]];
     int first = c - ch.rank;
     int left_before = (left_end[c] - chunk_left[c]) - (first > 0 ? left_end[first - 1] : 0);
-    int right_before = ch.rank * BUILD_CHUNK - left_before;
+    int right_before = ch.rank * POINT_BUILD_CHUNK - left_before;
     int n_left = nodes[nd.left].count;
     for (int i = 0; i < ch.count; ++i) {
         float4 p = pts[ch.start + i];
-        if (PointBuild_goes_left(&nd, p, ch.rank * BUILD_CHUNK + i))
+        if (PointBuild_goes_left(&nd, p, ch.rank * POINT_BUILD_CHUNK + i))
             out[nd.start + left_before++] = p;
         else
             out[nd.start + n_left + right_before++] = p;
@@ -220,25 +249,22 @@ __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __glo
 
 /* Copy the partitioned chunks back to the working array. */
 __kernel void PointBuild_chunk_copy(const __global Chunk *chunks, const __global float4 *from,
-                               __global float4 *to, const int n_chunks) {
+                               __global float4 *to, const __global int *chunk_end, const int n_active) {
     int c = get_global_id(0);
-    if (c >= n_chunks) return;
+    if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
     Chunk ch = chunks[c];
     for (int i = 0; i < ch.count; ++i) to[ch.start + i] = from[ch.start + i];
 }
 
-/* Class of each new node: 1 large (split again), 2 small root, 0 leaf. */
-__kernel void PointBuild_classify(const __global BuildNode *nodes, const int base, const int n,
-                             const int max_depth, __global int *cls) {
+/* The new nodes (base + i) into the next level's large list and the small
+ * roots' list, in order, at the exclusive prefix sums of their class flags. */
+__kernel void PointBuild_lists(const __global long *classes, const __global long *scanned, const int base,
+                               const int n, __global int *large, __global int *small) {
     int i = get_global_id(0);
     if (i >= n) return;
-    BuildNode nd = nodes[base + i];
-    int c = 0;
-    if (nd.depth < max_depth) {
-        if (nd.count > POINT_BUILD_SMALL) c = 1;
-        else if (nd.count >= 2) c = 2;
-    }
-    cls[i] = c;
+    long c = classes[i], at = scanned[i];
+    if (c & 0xffffffffL) large[(int)(at & 0xffffffffL)] = base + i;
+    if (c >> 32) small[(int)(at >> 32)] = base + i;
 }
 
 /* ---- small-node stage ---------------------------------------------------- */
@@ -349,11 +375,12 @@ __kernel void PointBuild_small_decide(const __global int *active, __global Build
 }
 
 /* Children of the splitting small nodes (indices into the active list) at
- * child_base + 2 j: the masks of both sides and the cell cut at the plane. */
+ * child_base + 2 j: the masks of both sides and the cell cut at the plane.
+ * Every child is active on the next level (small_decide makes leaves). */
 __kernel void PointBuild_small_split(const __global int *splitting, const __global int *active,
                                 __global BuildNode *nodes, const __global int *cand,
                                 const __global uint *masks, const int child_base,
-                                const int n_split) {
+                                __global int *next_active, const int n_split) {
     int j = get_global_id(0);
     if (j >= n_split) return;
     int slot = splitting[j];
@@ -368,15 +395,8 @@ __kernel void PointBuild_small_split(const __global int *splitting, const __glob
     l.hi = Axis_with(nd.hi, nd.axis, nd.split);
     r.lo = Axis_with(nd.lo, nd.axis, nd.split);
     PointBuild_store_children(nodes, id, child_base + 2 * j, l, r, nd.depth);
-}
-
-/* Which new small nodes are split further: 1, else 0 (leaf). */
-__kernel void PointBuild_small_classify(const __global BuildNode *nodes, const int base, const int n,
-                                   const int max_depth, __global int *cls) {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    BuildNode nd = nodes[base + i];
-    cls[i] = (nd.count >= 2 && nd.depth < max_depth) ? 1 : 0;
+    next_active[2 * j] = child_base + 2 * j;
+    next_active[2 * j + 1] = child_base + 2 * j + 1;
 }
 
 /* ---- output stage -------------------------------------------------------- */

@@ -1,7 +1,8 @@
 """Device build of the point kd-tree (point_tree_build.cl), level by level.
 
-The host loops over tree levels and reads back only list sizes; every
-kernel works on all nodes (or point chunks) of a level at once:
+The host loops over tree levels and reads back only list sizes (one read
+per level); every kernel works on all nodes (or point chunks) of a level at
+once:
 
 * large-node stage: median splits and empty-space cuts;
 * small-node stage: VVH splits over bit masks of each small root's points;
@@ -19,6 +20,7 @@ import pyopencl.array as cla
 
 from ..device import Device, primitives
 from ..device.constants import POINT_BUILD_SMALL as SMALL_MAX
+from ..device.constants import POINT_BUILD_CHUNK as CHUNK_POINTS
 from ..device.constants import POINT_TREE_MAX_DEPTH as MAX_DEPTH
 from ..device.layout import BUILD_NODE_DTYPE, BUILD_SUMS_DTYPE, CHUNK_DTYPE, KDNODE_DTYPE, POINT_NODE_DTYPE, float4_rows
 from ..device.timer import StageTimer
@@ -119,40 +121,45 @@ class _Build:
 
     def _large_level(self, active: cla.Array, n_active: int) -> tuple[cla.Array, int]:
         dev, nodes, i32 = self.device, self.table.array, np.int32
-        # the chunks of every active node, and their bounds
-        counts = dev.array(n_active, np.int32)
-        self.launch("PointBuild_chunk_counts", n_active, active.data, nodes.data, counts.data, i32(n_active))
-        primitives.scan(dev, counts.data, n_active, inclusive=True)
-        chunk_end = counts
-        n_chunks = int(dev.get(chunk_end[n_active - 1: n_active])[0])
-        chunks = dev.array(n_chunks, CHUNK_DTYPE)
-        chunk_lo, chunk_hi = dev.array(4 * n_chunks, np.float32), dev.array(4 * n_chunks, np.float32)
-        chunk_left, left_end = dev.array(n_chunks, np.int32), dev.array(n_chunks, np.int32)
+        # the chunks of every active node (their count stays on the device:
+        # the chunk kernels run over a bound), and their bounds
+        chunk_end = dev.array(n_active, np.int32)
+        self.launch("PointBuild_chunk_counts", n_active, active.data, nodes.data, chunk_end.data, i32(n_active))
+        primitives.scan(dev, chunk_end.data, n_active, inclusive=True)
+        bound = n_active + self.n // CHUNK_POINTS
+        chunks = dev.array(bound, CHUNK_DTYPE)
+        chunk_lo, chunk_hi = dev.array(4 * bound, np.float32), dev.array(4 * bound, np.float32)
+        chunk_left, left_end = dev.array(bound, np.int32), dev.array(bound, np.int32)
+        level = (chunk_end.data, i32(n_active))
         self.launch("PointBuild_chunks", n_active, active.data, nodes.data, chunk_end.data, chunks.data, i32(n_active))
-        self.launch("PointBuild_chunk_bounds", n_chunks, chunks.data, self.work.data, chunk_lo.data, chunk_hi.data,
-                    i32(n_chunks))
+        self.launch("PointBuild_chunk_bounds", bound, chunks.data, self.work.data, chunk_lo.data, chunk_hi.data, *level)
         # each node's cut or split, then its points partitioned stably
         self.launch("PointBuild_large_decide", n_active, active.data, nodes.data, chunk_end.data, chunk_lo.data,
                     chunk_hi.data, np.float32(self.params.empty_ratio), i32(n_active))
-        self.launch("PointBuild_chunk_count_left", n_chunks, chunks.data, active.data, nodes.data, self.work.data,
-                    chunk_left.data, i32(n_chunks))
-        primitives.scan(dev, chunk_left.data, n_chunks, out=left_end.data, inclusive=True)
+        self.launch("PointBuild_chunk_count_left", bound, chunks.data, active.data, nodes.data, self.work.data,
+                    chunk_left.data, *level, i32(bound))
+        primitives.scan(dev, chunk_left.data, bound, out=left_end.data, inclusive=True)
         base = self.table.reserve(2 * n_active)
         nodes = self.table.array
+        classes = dev.array(2 * n_active, np.int64)
         self.launch("PointBuild_large_split", n_active, active.data, nodes.data, chunk_end.data, left_end.data,
-                    i32(base), i32(n_active))
-        self.launch("PointBuild_chunk_scatter", n_chunks, chunks.data, active.data, nodes.data, self.work.data,
-                    self.scratch.data, chunk_left.data, left_end.data, i32(n_chunks))
-        self.launch("PointBuild_chunk_copy", n_chunks, chunks.data, self.scratch.data, self.work.data, i32(n_chunks))
+                    i32(base), self.max_depth, classes.data, i32(n_active))
+        self.launch("PointBuild_chunk_scatter", bound, chunks.data, active.data, nodes.data, self.work.data,
+                    self.scratch.data, chunk_left.data, left_end.data, *level)
+        self.launch("PointBuild_chunk_copy", bound, chunks.data, self.scratch.data, self.work.data, *level)
         self.batches.append((base, 2 * n_active))
-        # children: small roots and the next level's large nodes
-        classes = dev.array(2 * n_active, np.int32)
-        self.launch("PointBuild_classify", 2 * n_active, nodes.data, i32(base), i32(2 * n_active), self.max_depth,
-                    classes.data)
-        smalls, n_small = primitives.compact_class(dev, classes, 2, base)
+        # children: the next level's large nodes and the small roots, counted
+        # together (low and high words of one long) and read in one go
+        scanned = dev.array(2 * n_active, np.int64)
+        total = primitives.scan(dev, classes.data, 2 * n_active, kind="long", out=scanned.data)
+        large, small = dev.array(2 * n_active, np.int32), dev.array(2 * n_active, np.int32)
+        self.launch("PointBuild_lists", 2 * n_active, classes.data, scanned.data, i32(base), i32(2 * n_active),
+                    large.data, small.data)
+        counts = int(dev.scalar(total, np.int64))
+        n_large, n_small = counts & 0xFFFFFFFF, counts >> 32
         if n_small:
-            self.small_parts.append(smalls[:n_small])
-        return primitives.compact_class(dev, classes, 1, base)
+            self.small_parts.append(small[:n_small])
+        return large, n_large
 
     def small_stage(self) -> None:
         """VVH splits over bit masks of each small root's points."""
@@ -179,22 +186,22 @@ class _Build:
         return float(np.median(estimates)) if estimates.size else 0.0
 
     def _small_level(self, active: cla.Array, n_active: int) -> tuple[cla.Array, int]:
+        """Split the active small nodes that gain by it; all their children are
+        the next level's active nodes (small_decide leaves the leaves)."""
         dev, i32 = self.device, np.int32
         flag, cand = dev.array(n_active, np.int32), dev.array(n_active, np.int32)
         self.launch("PointBuild_small_decide", n_active, active.data, self.table.array.data, self.work.data,
                     self.masks.data, np.float32(self.radius), np.float32(self.params.cost_traverse), self.max_depth,
                     flag.data, cand.data, i32(n_active))
-        splitting, n_split = primitives.compact_class(dev, flag, 1, 0)
+        splitting, n_split = primitives.compact(dev, flag.data, n_active)
         if not n_split:
             return active, 0
         base = self.table.reserve(2 * n_split)
-        self.launch("PointBuild_small_split", n_split, splitting.data, active.data, self.table.array.data, cand.data,
-                    self.masks.data, i32(base), i32(n_split))
+        children = dev.array(2 * n_split, np.int32)
+        self.launch("PointBuild_small_split", n_split, splitting, active.data, self.table.array.data, cand.data,
+                    self.masks.data, i32(base), children.data, i32(n_split))
         self.batches.append((base, 2 * n_split))
-        classes = dev.array(2 * n_split, np.int32)
-        self.launch("PointBuild_small_classify", 2 * n_split, self.table.array.data, i32(base), i32(2 * n_split),
-                    self.max_depth, classes.data)
-        return primitives.compact_class(dev, classes, 1, base)
+        return children, 2 * n_split
 
     def output_stage(self) -> tuple:
         """Sums bottom-up, preorder addresses top-down, then every node and

@@ -13,6 +13,7 @@ KD_LEAF = 3
 KD_MAX_DEPTH = 64  # triangle tree: build limit and traversal stack
 POINT_TREE_MAX_DEPTH = 60  # point tree: build limit and kNN stack
 POINT_BUILD_SMALL = 32  # points of a small point-tree node: the width of its bit masks
+POINT_BUILD_CHUNK = 256  # points of a large point-tree node processed by one work item
 
 # light rows (scene/tables.py, shading/lights.h)
 LIGHT_POINT = 0

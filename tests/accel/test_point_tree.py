@@ -91,6 +91,21 @@ def test_bad_arguments_raise(device):
         PointTree.build(device, np.array([[0, 0, np.nan]], np.float32))
 
 
+def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
+    """The host learns each level's list sizes from one read (the chunk
+    counts stay on the device); add one for the VVH radius estimates."""
+    reads = []
+    for name in ("to_host", "get"):
+        original = getattr(type(device), name)
+        monkeypatch.setattr(type(device), name, lambda self, *a, _f=original, **k: (reads.append(1), _f(self, *a, **k))[1])
+    points = CLOUDS["clustered"].astype(np.float32)
+    tree = PointTree.build(device, points)
+    levels = tree.stats["large_levels"] + tree.stats["small_levels"]
+    assert tree.stats["large_levels"] >= 3
+    assert len(reads) <= levels + 1
+    check_knn(tree, points, RNG.random((50, 3)).astype(np.float32), 8)
+
+
 def test_node_payloads_sum_their_photons(device):
     n = 3000
     points = RNG.random((n, 3)).astype(np.float32)

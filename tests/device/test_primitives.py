@@ -32,3 +32,24 @@ def test_grouping_equals_a_stable_numpy_sort(device, n, key_count):
     np.testing.assert_array_equal(end - start, counts)
     filled = counts > 0
     np.testing.assert_array_equal(start[filled], np.searchsorted(np.sort(keys), np.flatnonzero(filled)))
+
+
+def test_a_kernel_typed_on_its_first_launch_takes_any_integer_after(device):
+    """The launch helper declares a kernel's scalar types from its first
+    launch (numpy scalars); later launches may pass Python or other numpy ints."""
+    kernel = device.kernel("device/primitives.cl", "Prim_iota")
+    for n in (np.int32(5), 9, np.int64(12)):
+        out = device.to_device(np.full(16, -1, np.int32), writable=True)
+        kernel(int(n), out, n)
+        np.testing.assert_array_equal(read(device, out, 16), np.where(np.arange(16) < n, np.arange(16), -1))
+
+
+def test_device_arrays_are_one_dimensional_views_of_their_buffers(device):
+    values = np.arange(10, dtype=np.int64)
+    array = device.array_from(values)
+    assert array.shape == (10,) and array.dtype == np.int64 and array.nbytes == 80
+    np.testing.assert_array_equal(device.get(array), values)
+    np.testing.assert_array_equal(device.get(array[3:7]), values[3:7])
+    view = device.view(array.data, 4, np.int32)
+    np.testing.assert_array_equal(device.get(view), values[:2].view(np.int32))
+    assert len(device.array(0, np.float32)) == 1
