@@ -59,6 +59,17 @@ def test_interpolation_equals_the_brute_force_weighted_sum(device, shape):
     assert np.isfinite(got).all()
 
 
+@pytest.mark.parametrize("shape", ["two_planes", "box"])
+def test_radii_over_four_decades_equal_the_brute_force_sum(device, shape):
+    """Samples on many levels of the hash grid, listed in every cell their
+    sphere meets: none found twice, none missed."""
+    (spos, snrm, irradiance, _), (pos, nrm) = cache_on(shape, 300, seed=4)
+    radius = np.exp(np.random.default_rng(5).uniform(np.log(1e-3), np.log(10.0), len(spos))).astype(np.float32)
+    got, _ = interpolate(device, spos, snrm, irradiance, radius, pos, nrm)
+    want, _ = brute_force(spos, snrm, irradiance, radius, pos, nrm)
+    np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-6)
+
+
 def test_uncovered_points_take_the_nearest_sample_facing_their_way(device):
     samples, (pos, nrm) = cache_on("box", 80, r_range=(1e-4, 2e-4))
     got, stats = interpolate(device, *samples, pos, nrm)

@@ -2,9 +2,9 @@
  * w_j = 1 / (|x - x_j| / R_j + sqrt(2 - 2 n . n_j)) over the samples within
  * a R_j of x that face the same way and are not in front of x [WZPB09, Ward
  * 1988]. Candidates come from a hash grid with one level per power-of-two
- * radius: a sample sits in the one cell of the level whose cells are at
- * least its radius across, so a query visits the 27 cells around it on each
- * level in use. Points no sample covers take the nearest sample with a
+ * radius: a sample is listed in every cell its coverage sphere's box meets
+ * on the level whose cells are at least its radius across (at most 3 per
+ * axis), so a query visits one cell, its own, on each level in use. Points no sample covers take the nearest sample with a
  * compatible normal, else the nearest one (gpu_core/gi/cache/interpolation.py). */
 #include "gi/cache/cache.h"
 
@@ -12,6 +12,7 @@
  * far wider than float rounding of the coordinates. */
 #define CACHE_LEVELS 18
 #define CACHE_MIN_COS 0.01f /* samples with n . n_j at or below this are rejected */
+#define CACHE_SLOTS 27 /* cells a sample can be listed in: 3 per axis */
 
 /* Level of a sample of coverage radius r <= 2: the finest one whose cells
  * (2^(1-g) across) are still at least r. */
@@ -22,7 +23,7 @@ inline int Cache_level(float r) {
     return g;
 }
 
-/* Cell of x on level g (x inside the normalised box, so every index is >= 0). */
+/* Cell of x on level g. */
 inline int4 Cache_level_cell(float3 x, int g) {
     float3 f = floor((x + 1.0f) / ldexp(2.0f, -g));
     return (int4)(convert_int3(f), g);
@@ -49,19 +50,29 @@ __kernel void Cache_prepare_samples(const __global float4 *spos, const __global 
     out_rad[j] = r;
 }
 
-/* Each sample's level cell, its hash slot, and the set of levels in use. */
+/* The cells of each sample's level that the box of its coverage sphere
+ * meets, in its CACHE_SLOTS slots (27 j + t) with their hash buckets; the
+ * slots left over get the bucket mask + 1, past every real one. And the set
+ * of levels in use. */
 __kernel void Cache_sample_cells(const __global float4 *spos, const int m, const uint mask,
                                  __global int4 *cells, __global uint *keys,
                                  volatile __global uint *levels) {
     int j = get_global_id(0);
     if (j >= m) return;
-    int4 cell = Cache_level_cell(spos[j].xyz, Cache_level(spos[j].w));
-    cells[j] = cell;
-    keys[j] = Cache_bucket(cell, mask);
-    atomic_or(levels, 1U << cell.w);
+    float4 s = spos[j];
+    int g = Cache_level(s.w);
+    int4 lo = Cache_level_cell(s.xyz - s.w, g), hi = Cache_level_cell(s.xyz + s.w, g);
+    for (int t = 0; t < CACHE_SLOTS; ++t) {
+        int4 cell = lo + (int4)(t % 3, t / 3 % 3, t / 9, 0);
+        bool inside = cell.x <= hi.x && cell.y <= hi.y && cell.z <= hi.z;
+        cells[CACHE_SLOTS * j + t] = cell;
+        keys[CACHE_SLOTS * j + t] = inside ? Cache_bucket(cell, mask) : mask + 1U;
+    }
+    atomic_or(levels, 1U << g);
 }
 
-/* The hash grid of coverage spheres and the samples it holds. */
+/* The hash grid of coverage spheres: the cell of each sample slot, and the
+ * slots of each bucket (bucket_items[bucket_start[b] .. bucket_end[b])). */
 #define CACHE_HASH_PARAMS                                                    \
     const __global float4 *spos, const __global float4 *snrm, const __global float4 *sirr,          \
         const __global float *srad, const __global int4 *cells, const __global int *bucket_start, \
@@ -76,26 +87,22 @@ inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float 
     *wsum = 0.0f;
     for (int g = 0; g < CACHE_LEVELS; ++g) {
         if (!((levels >> g) & 1U)) continue;
-        int4 home = Cache_level_cell(x, g);
-        for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-            int4 cell = home + (int4)(dx, dy, dz, 0);
-            uint b = Cache_bucket(cell, mask);
-            for (int k = bucket_start[b]; k < bucket_end[b]; ++k) {
-                int j = bucket_items[k];
-                int4 cj = cells[j];
-                if (cj.x != cell.x || cj.y != cell.y || cj.z != cell.z || cj.w != g) continue;
-                float3 d = x - spos[j].xyz;
-                float dist = sqrt(dot(d, d));
-                float3 nj = snrm[j].xyz;
-                float cosn = dot(nx, nj);
-                float rj = srad[j];
-                if (dist >= spos[j].w || cosn <= CACHE_MIN_COS || dot(d, nx + nj) < -behind * rj) continue;
-                float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
-                *wsum += w;
-                mean += (w / *wsum) * (sirr[j].xyz - mean);
-            }
+        int4 cell = Cache_level_cell(x, g);
+        uint b = Cache_bucket(cell, mask);
+        for (int k = bucket_start[b]; k < bucket_end[b]; ++k) {
+            int slot = bucket_items[k];
+            int4 cs = cells[slot];
+            if (cs.x != cell.x || cs.y != cell.y || cs.z != cell.z || cs.w != g) continue;
+            int j = slot / CACHE_SLOTS;
+            float3 d = x - spos[j].xyz;
+            float dist = sqrt(dot(d, d));
+            float3 nj = snrm[j].xyz;
+            float cosn = dot(nx, nj);
+            float rj = srad[j];
+            if (dist >= spos[j].w || cosn <= CACHE_MIN_COS || dot(d, nx + nj) < -behind * rj) continue;
+            float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
+            *wsum += w;
+            mean += (w / *wsum) * (sirr[j].xyz - mean);
         }
     }
     return mean;

@@ -26,6 +26,7 @@ BEHIND = 0.02  # default tolerance of the in-front test, in units of R_j
 _MIN_R = 1e-6  # R_j bounds, in units of the largest side of the box of
 _MAX_R = 1e6  # samples and points (zero, negative or NaN R_j -> the minimum)
 _MAX_COVER = 2.0  # a coverage radius this large already spans the whole box
+_SLOTS = 27  # cells a sample is listed in, at most (interpolation.cl CACHE_SLOTS)
 
 
 _DEFINES = {"CACHE_MIN_R": f"{_MIN_R!r}f", "CACHE_MAX_R": f"{_MAX_R!r}f", "CACHE_MAX_COVER": f"{_MAX_COVER!r}f"}
@@ -72,11 +73,13 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
             m, spos, srad, np.int32(m), np.append(high, 0).astype(np.float32), np.append(low, 0).astype(np.float32),
             np.float32(frame.extent), np.float32(a), d_spos, d_srad)
         d_pos = frame.normalise(device, pos, n)
-        # hash grid of coverage spheres, one level per power-of-two radius
-        table = 1 << max(2 * m - 1, 1).bit_length()
-        cells, keys, levels = device.empty(16 * m), device.empty(4 * m), device.zeros(4)
+        # hash grid of coverage spheres, one level per power-of-two radius:
+        # each sample listed in up to _SLOTS cells, about 16 buckets a sample
+        table = 1 << max(16 * m - 1, 1).bit_length()
+        slots = _SLOTS * m
+        cells, keys, levels = device.empty(16 * slots), device.empty(4 * slots), device.zeros(4)
         _k(device, "Cache_sample_cells")(m, d_spos, np.int32(m), np.uint32(table - 1), cells, keys, levels)
-        buckets = primitives.group(device, keys, m, table)
+        buckets = primitives.group(device, keys, slots, table + 1)
         level_bits = device.scalar(levels, np.uint32)
         # uniform grid of sample positions for the nearest-sample fallback
         lo, hi = primitives.bounds(device, d_spos, m)
