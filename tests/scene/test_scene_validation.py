@@ -386,3 +386,13 @@ def test_a_moved_part_that_needs_a_repair_is_checked_with_the_whole_scene():
     # and a clean move after a scene that needed repairs: the whole scene again
     again = dataclasses.replace(moved, triangles=moved.triangles.copy())
     assert validate(again, memo).report.dropped_nonfinite_triangles == 1
+
+
+def test_the_materials_in_use_are_kept_for_the_scenes_material_ids_and_follow_a_new_array():
+    tris = np.stack([quad((x, 0.0, 0.0), 1.0)[0] for x in range(4)])
+    scene = _scene(tris, ids=[0, 0, 2, 2], materials=Materials.make([{"base_color": (0.5, 0.5, 0.5)}] * 3))
+    used = scene.used_materials()
+    np.testing.assert_array_equal(used, [0, 2])
+    assert not used.flags.writeable  # shared by the plan's many questions
+    scene.material_ids = np.array([1, 1, 1, 1], np.int32)
+    np.testing.assert_array_equal(scene.used_materials(), [1])
