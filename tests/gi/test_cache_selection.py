@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from cache_shapes import shading_points
 
+from gpu_core.gi.cache import clusters
 from gpu_core.gi.cache import seeding as cache_seeding
 from gpu_core.gi.cache.samples import ALPHA0, select_samples
 from gpu_core.device.layout import float4_rows as float4
@@ -184,6 +185,29 @@ def test_assignments_equal_brute_force_nearest_centre_under_eps(device, shape, a
     nearest, clear = tie_choice(to_centre)
     np.testing.assert_array_equal(samples.cluster_of[clear], nearest[clear])
     assert clear.mean() > 0.99
+
+
+@pytest.mark.parametrize("shape", ["two_planes", "box"])
+def test_assignments_through_centre_trees_built_again_each_iteration_equal_brute_force(device, shape, monkeypatch):
+    """The tree over the centres may be built again between iterations
+    (when its refit boxes cost more than a fresh tree): the search stays exact."""
+    built = []
+    original = clusters._CentreTree.__init__
+    monkeypatch.setattr(clusters._CentreTree, "__init__", lambda self, *a: (built.append(1), original(self, *a))[1])
+    monkeypatch.setattr(clusters, "_needs_new_tree", lambda work, fresh: True)
+    pos, nrm, pix = shading_points(shape, SIZE, SIZE)
+    samples = select_samples(device, pos, nrm, pix, SIZE, SIZE, 250, max_iterations=4, converge_fraction=0.0)
+    assert len(built) == samples.stats["iterations"]
+    to_centre = all_eps(samples, pos, nrm)
+    nearest, clear = tie_choice(to_centre)
+    np.testing.assert_array_equal(samples.cluster_of[clear], nearest[clear])
+    assert clear.mean() > 0.99
+
+
+def test_a_new_centre_tree_is_built_only_once_the_refit_one_costs_more():
+    assert clusters._needs_new_tree(1300, 1000)
+    assert not clusters._needs_new_tree(900, 1000)
+    assert not clusters._needs_new_tree(1000, 1000)
 
 
 def test_kmeans_stops_at_the_iteration_cap(device):

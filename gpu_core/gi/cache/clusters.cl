@@ -36,6 +36,7 @@ __kernel void Cache_tree_boxes(POINT_TREE_PARAMS, const __global PointNode *pt_i
 }
 
 #define CACHE_TIE_SLOTS 8 /* near-tied centres remembered by Cache_assign */
+#define CACHE_WORK_STRIDE 16 /* every this many points counts its centres evaluated */
 
 /* Whether every centre at least `dist` from the point has eps beyond
  * `window`: alpha * dist bounds eps from below (the normal term is >= 0);
@@ -143,7 +144,9 @@ inline int CacheTies_lowest(const CacheTies *t) {
 }
 
 /* Each point joins the centre of smallest eps (ties within the window:
- * lower index); counts the points whose cluster changed. cluster[] holds
+ * lower index); counts the points whose cluster changed (counts[0]) and,
+ * over every CACHE_WORK_STRIDE-th point, the centres evaluated (counts[1]:
+ * what the search costs with this tree). cluster[] holds
  * the previous choice (-1 for none), whose eps starts the search with a
  * tight bound. The kd-tree over the centres (its points' w: centre index;
  * box: Cache_tree_boxes) is walked until no
@@ -154,7 +157,7 @@ inline int CacheTies_lowest(const CacheTies *t) {
 __kernel void Cache_assign(const __global float4 *pos, const __global float4 *nrm, const int n,
                            const __global float4 *cpos, const __global float4 *cnrm, POINT_TREE_PARAMS,
                            const __global float4 *box, const float alpha, __global int *cluster,
-                           volatile __global int *changed) {
+                           volatile __global int *counts) {
     int i = get_global_id(0);
     if (i >= n) return;
     float3 x = pos[i].xyz, nx = nrm[i].xyz;
@@ -165,9 +168,10 @@ __kernel void Cache_assign(const __global float4 *pos, const __global float4 *nr
     /* every centre that may fall inside the window of the smallest eps */
     CacheWalk walk;
     CacheWalk_begin(&walk, x, box);
-    int leaf;
+    int leaf, evaluated = 0;
     while ((leaf = CacheWalk_next(&walk, pt_nodes, box, x, alpha, Cache_tie_window(ties.best_e))) >= 0) {
         KdNode nd = pt_nodes[leaf];
+        evaluated += nd.count;
         for (int j = nd.child; j < nd.child + nd.count; ++j) {
             int id = as_int(pt_points[j].w);
             if (id != prev) CacheTies_add(&ties, id, Cache_eps(alpha, x, nx, cpos[id].xyz, cnrm[id].xyz));
@@ -187,8 +191,9 @@ __kernel void Cache_assign(const __global float4 *pos, const __global float4 *nr
     }
     if (best != prev) {
         cluster[i] = best;
-        atomic_inc(changed);
+        atomic_inc(&counts[0]);
     }
+    if (i % CACHE_WORK_STRIDE == 0) atomic_add(&counts[1], evaluated);
 }
 
 /* New centre of each non-empty cluster: mean position and normalised mean
