@@ -22,7 +22,6 @@ from .settings import RenderSettings
 from .shading.pixel_filter import filter_table
 
 PROGRAM = "image.cl"
-_BATCH_SECONDS = 0.1  # aimed duration of one launch (cancel latency)
 _FIRST_BATCH_PATHS = 1 << 14  # camera paths in the first launch, before any timing
 # pixels per launch: a fixed ladder, so launch sizes repeat from one render to the next
 BATCH_LADDER = (256, 1024, 4096, 16384, 65536)
@@ -102,7 +101,7 @@ def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: 
             progress(start / total, f"rendered {start}/{total} pixels")
         if start < total:
             check_stop(should_stop)
-        batch = _ladder(int(count * min(_BATCH_SECONDS / max(elapsed, 1e-4), 4.0)), settings.batch_pixels)
+        batch = _ladder(int(count * min(settings.batch_seconds / max(elapsed, 1e-4), 4.0)), settings.batch_pixels)
     return _read_passes(device, settings, w, h, combined, depth, normal, light, albedo, feature_normal), batches
 
 

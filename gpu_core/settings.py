@@ -101,6 +101,7 @@ class RenderSettings:
     light_samples: int = internal(1)  # shadow rays per light at each diffuse point
     transparent_background: bool = internal(False)  # film alpha 0 where the world is seen
     batch_pixels: int = internal(16384)  # most pixels per kernel launch (bounds cancel latency)
+    batch_seconds: float = internal(0.1)  # aimed duration of one image launch: what a stop or an edit waits for
     light_passes: bool = internal(False)  # also return the light passes (image.LIGHT_PASSES)
     denoising_passes: bool = internal(False)  # also return Denoising Albedo, Normal and Depth
     # the share of the photon counts a render traces when it cannot use the
@@ -127,6 +128,8 @@ class RenderSettings:
         values["seed"] = int(self.seed) & 0xFFFFFFFF
         values["light_samples"] = max(1, int(self.light_samples))
         values["batch_pixels"] = max(1, int(self.batch_pixels))
+        seconds = float(self.batch_seconds)
+        values["batch_seconds"] = min(max(seconds, 1e-3), 10.0) if seconds == seconds else 0.1
         share = float(self.photon_share)
         values["photon_share"] = min(max(share, 1e-3), 1.0) if share == share else 1.0
         return replace(self, **values)

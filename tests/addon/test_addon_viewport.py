@@ -14,7 +14,7 @@ import pytest
 
 from blender_addon.display import DISPLAY_MAX, prepare_pixels
 from blender_addon.engine import GpuGiRenderEngine
-from blender_addon.viewport import COARSE_FACTOR, Job, ViewportSession, passes, view_state
+from blender_addon.viewport import BATCH_SECONDS, COARSE_FACTOR, Job, ViewportSession, pass_settings, passes, view_state
 from gpu_core.scene import FILTER_BLACKMAN_HARRIS, FILTER_BOX
 from gpu_core.errors import DeviceError, RenderCancelled
 from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Lights
@@ -239,6 +239,12 @@ def test_pass_schedule_doubles_up_to_its_cap_and_never_ends_at_zero_samples():
     counts = [step.samples for step in itertools.islice(passes(_job(samples=0)), 8)]
     assert counts == [1, 1, 2, 4, 8, 16, 16, 16]
     assert sum(step.samples for step in passes(_job(samples=100)) if not step.coarse) == 100
+
+
+def test_every_viewport_pass_launches_the_image_in_shorter_batches_than_f12():
+    job = _job(samples=4)
+    assert all(pass_settings(job.settings, step).batch_seconds == BATCH_SECONDS for step in passes(job))
+    assert BATCH_SECONDS < RenderSettings().batch_seconds
 
 
 @pytest.mark.parametrize("denoise", [False, True])

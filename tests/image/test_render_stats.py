@@ -59,6 +59,15 @@ def test_launches_stay_within_batch_pixels_and_batching_does_not_change_the_imag
         np.testing.assert_array_equal(small.passes[name], large.passes[name])
 
 
+def test_a_shorter_batch_time_splits_the_image_into_more_launches_of_the_same_image(device):
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0.3, 0.0, 1.0), power=(40,) * 3)])
+    scene = plane_scene(lights, camera_looking_down(size=96))
+    short = Renderer(device).render(scene, RenderSettings(samples=16, batch_seconds=1e-3))
+    long = Renderer(device).render(scene, RenderSettings(samples=16, batch_seconds=10.0))
+    assert short.stats["batches"] > long.stats["batches"]
+    np.testing.assert_array_equal(short.passes["Combined"], long.passes["Combined"])
+
+
 def test_progress_rises_to_one_between_batches(device):
     fractions = []
     Renderer(device).render(lit_plane(), RenderSettings(samples=2, batch_pixels=64),
