@@ -186,10 +186,10 @@ __kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __
 
 /* Class of a new node as two counters in one long: low word 1 when it is
  * large (split again), high word 1 when it is a small root; 0 for a leaf. */
-inline long PointBuild_class_flags(const BuildNode *nd, int max_depth) {
-    if (nd->depth >= max_depth) return 0;
-    if (nd->count > POINT_BUILD_SMALL) return 1;
-    return nd->count >= 2 ? ((long)1 << 32) : 0;
+inline long PointBuild_class_flags(int count, int depth, int max_depth) {
+    if (depth >= max_depth) return 0;
+    if (count > POINT_BUILD_SMALL) return 1;
+    return count >= 2 ? ((long)1 << 32) : 0;
 }
 
 /* Create both children of every active node at child_base + 2 j, with
@@ -219,9 +219,8 @@ __kernel void PointBuild_large_split(const __global int *active, __global BuildN
     l.mask = r.mask = 0u;
     l.root = r.root = -1;
     PointBuild_store_children(nodes, id, child_base + 2 * j, l, r, nd.depth);
-    l.depth = r.depth = nd.depth + 1;
-    classes[2 * j] = PointBuild_class_flags(&l, max_depth);
-    classes[2 * j + 1] = PointBuild_class_flags(&r, max_depth);
+    classes[2 * j] = PointBuild_class_flags(l.count, nd.depth + 1, max_depth);
+    classes[2 * j + 1] = PointBuild_class_flags(r.count, nd.depth + 1, max_depth);
 }
 
 /* Stable partition of each chunk's points into its node's two children. */

@@ -107,12 +107,6 @@ __kernel void Prim_compact(const __global int *flags, const __global int *scanne
     if (i < n && flags[i]) out[scanned[i]] = base + i;
 }
 
-/* flags[i] = classes[i] == which. */
-__kernel void Prim_flags_equal(const __global int *classes, const int n, const int which, __global int *flags) {
-    int i = get_global_id(0);
-    if (i < n) flags[i] = classes[i] == which;
-}
-
 /* out[i] = values[index[i]] for float4 rows. */
 __kernel void Prim_gather_float4(const __global float4 *values, const __global int *index, const int n,
                                  __global float4 *out) {

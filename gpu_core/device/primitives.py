@@ -135,16 +135,6 @@ def compact(device: Device, flags: cl.Buffer, n: int, base: int = 0) -> tuple[cl
     return out, count
 
 
-def compact_class(device: Device, classes: cla.Array, which: int, base: int = 0) -> tuple[cla.Array, int]:
-    """``base + i`` for every ``i`` with ``classes[i] == which``, in order
-    (a device array), and how many."""
-    n = len(classes)
-    flags = device.empty(4 * n)
-    _k(device, "Prim_flags_equal")(n, classes.data, np.int32(n), np.int32(which), flags)
-    out, count = compact(device, flags, n, base)
-    return device.view(out, count, np.int32), count
-
-
 def gather_rows(device: Device, values: cl.Buffer, index: cl.Buffer, n: int) -> cl.Buffer:
     """A new buffer of the float4 rows ``values[index[i]]``, i < n."""
     out = device.empty(16 * n)

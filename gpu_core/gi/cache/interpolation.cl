@@ -4,15 +4,16 @@
  * 1988]. Candidates come from a hash grid with one level per power-of-two
  * radius: a sample is listed in every cell its coverage sphere's box meets
  * on the level whose cells are at least its radius across (at most 3 per
- * axis), so a query visits one cell, its own, on each level in use. Points no sample covers take the nearest sample with a
- * compatible normal, else the nearest one (gpu_core/gi/cache/interpolation.py). */
+ * axis: CACHE_SLOTS cells, from the host), so a query visits one cell, its
+ * own, on each level in use. Points no sample covers take the nearest
+ * sample with a compatible normal, else the nearest one
+ * (gpu_core/gi/cache/interpolation.py). */
 #include "gi/cache/cache.h"
 
 /* Cell sizes 2, 1, 1/2, ... 2^-16 (normalised units): the finest cells stay
  * far wider than float rounding of the coordinates. */
 #define CACHE_LEVELS 18
 #define CACHE_MIN_COS 0.01f /* samples with n . n_j at or below this are rejected */
-#define CACHE_SLOTS 27 /* cells a sample can be listed in: 3 per axis */
 
 /* Level of a sample of coverage radius r <= 2: the finest one whose cells
  * (2^(1-g) across) are still at least r. */
@@ -51,9 +52,9 @@ __kernel void Cache_prepare_samples(const __global float4 *spos, const __global 
 }
 
 /* The cells of each sample's level that the box of its coverage sphere
- * meets, in its CACHE_SLOTS slots (27 j + t) with their hash buckets; the
- * slots left over get the bucket mask + 1, past every real one. And the set
- * of levels in use. */
+ * meets, in its slots (CACHE_SLOTS j + t) with their hash buckets; the slots
+ * left over get the bucket mask + 1, past every real one. And the set of
+ * levels in use. */
 __kernel void Cache_sample_cells(const __global float4 *spos, const int m, const uint mask,
                                  __global int4 *cells, __global uint *keys,
                                  volatile __global uint *levels) {

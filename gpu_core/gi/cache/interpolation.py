@@ -26,10 +26,11 @@ BEHIND = 0.02  # default tolerance of the in-front test, in units of R_j
 _MIN_R = 1e-6  # R_j bounds, in units of the largest side of the box of
 _MAX_R = 1e6  # samples and points (zero, negative or NaN R_j -> the minimum)
 _MAX_COVER = 2.0  # a coverage radius this large already spans the whole box
-_SLOTS = 27  # cells a sample is listed in, at most (interpolation.cl CACHE_SLOTS)
+_SLOTS = 27  # cells a sample is listed in, at most: 3 per axis
 
 
-_DEFINES = {"CACHE_MIN_R": f"{_MIN_R!r}f", "CACHE_MAX_R": f"{_MAX_R!r}f", "CACHE_MAX_COVER": f"{_MAX_COVER!r}f"}
+_DEFINES = {"CACHE_MIN_R": f"{_MIN_R!r}f", "CACHE_MAX_R": f"{_MAX_R!r}f", "CACHE_MAX_COVER": f"{_MAX_COVER!r}f",
+            "CACHE_SLOTS": _SLOTS}
 
 
 def programs() -> list[tuple[str, dict]]:
