@@ -23,6 +23,7 @@ from .denoise import denoise
 from .device import Device
 from .device.timer import StageTimer
 from .errors import DeviceError, GpuGiError, check_stop
+from .gi.cache.samples import HeldSamples
 from .gi.pipeline import GiField, render_gi
 from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.reweight import reweight_maps
@@ -56,6 +57,7 @@ class Renderer:
         self._maps: PhotonMaps | None = None
         self._cache: GiField | None = None
         self._records: dict = {}  # records key -> CacheRecords, the most recent last
+        self._samples = HeldSamples()  # cache points of the latest renders, kept for the same shading points
         self._unsynced: set[str] = set()  # parts named in edits and not uploaded yet (a render was stopped)
         self._geometry = GeometryMemo()  # the last scene's checked geometry
 
@@ -80,6 +82,7 @@ class Renderer:
     def _forget(self) -> None:
         """Drop everything held on the device (after a device failure)."""
         self._held, self._buffers, self._maps, self._cache, self._records = Held(), None, None, None, {}
+        self._samples = HeldSamples()
         self._unsynced = set()
 
     def _render(self, scene: Scene, settings: RenderSettings | None, progress, should_stop, edits,
@@ -168,7 +171,8 @@ class Renderer:
         self._held.cache_key, self._cache = None, None
         records = self._records.get(the_plan.records_key) if the_plan.records_reused else None
         field_, records = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
-                                    the_plan.stages, the_plan.scene_defines, timer, should_stop, records, say)
+                                    the_plan.stages, the_plan.scene_defines, timer, should_stop, records, say,
+                                    self._samples)
         self._held.cache_key, self._cache = the_plan.cache_key, field_
         self._keep_records(the_plan.records_key, records, settings)
         return field_
@@ -193,7 +197,7 @@ class Renderer:
         stats = {
             "device": self.device.name,
             "mode": settings.mode,
-            "plan": the_plan.stages,
+            "plan": _stages_run(the_plan, field_),
             "ms": timer.ms,
             "triangles": scene.triangle_count,
             "lights": len(scene.lights),
@@ -219,6 +223,14 @@ class Renderer:
         if self.device.fallback_message:
             warnings.append(self.device.fallback_message)
         return warnings
+
+
+def _stages_run(the_plan: Plan, field_: GiField | None) -> list[str]:
+    """The plan's stages, with the cache points named kept where the GI
+    stages found the shading points of an earlier render (HeldSamples)."""
+    if field_ is None or not field_.stats.get("sample_points_reused"):
+        return the_plan.stages
+    return [stage + "_reused" if stage == "sample_points" else stage for stage in the_plan.stages]
 
 
 def device_failure(device_name: str, err: Exception) -> str:

@@ -98,6 +98,19 @@ __kernel void Prim_int4_of(const __global int *in, const int n, __global int4 *o
     if (i < n) out[i] = (int4)(in[i], 0, 0, 0);
 }
 
+/* ---- comparison --------------------------------------------------------- */
+
+/* flag[0] = 1 where a chunk of the n ints of a and b differs (bit for bit;
+ * the host clears the flag first). */
+__kernel void Prim_flag_difference(const __global int *a, const __global int *b, const int n,
+                                   __global int *flag, const int chunks) {
+    int c = get_global_id(0);
+    if (c >= chunks) return;
+    int differ = 0;
+    for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) differ |= a[i] ^ b[i];
+    if (differ) flag[0] = 1;
+}
+
 /* ---- compaction and gathers -------------------------------------------- */
 
 /* base + i for every i whose flag is set, at its exclusive prefix sum. */

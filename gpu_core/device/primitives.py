@@ -124,6 +124,16 @@ def bounds(device: Device, points: cl.Buffer, n: int) -> tuple[np.ndarray, np.nd
     return _reduce(device, "min_float4", points, n, f4), _reduce(device, "max_float4", points, n, f4)
 
 
+def same_ints(device: Device, a: cl.Buffer, b: cl.Buffer, n: int) -> bool:
+    """Whether the first ``n`` ints of ``a`` and ``b`` are equal, bit for
+    bit (floats compared as their bits: NaNs alike, 0 and -0 not)."""
+    if n <= 0:
+        return True
+    flag = device.zeros(4)
+    _k(device, "Prim_flag_difference")(_chunks(n), a, b, np.int32(n), flag, np.int32(_chunks(n)))
+    return not int(device.scalar(flag))
+
+
 def compact(device: Device, flags: cl.Buffer, n: int, base: int = 0) -> tuple[cl.Buffer, int]:
     """``base + i`` for every ``i`` whose int flag is set, in order, and how many."""
     if n <= 0:

@@ -74,12 +74,15 @@ class CacheRecords:
 def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int, int], settings: RenderSettings,
               maps: PhotonMaps, stages: list[str], scene_defines: dict, timer: StageTimer,
               should_stop: Callable[[], bool] | None = None, records: CacheRecords | None = None,
-              say: Callable[[str], None] | None = None) -> tuple[GiField, CacheRecords | None]:
+              say: Callable[[str], None] | None = None,
+              held_samples: samples.HeldSamples | None = None) -> tuple[GiField, CacheRecords | None]:
     """The GI field of the pixels in ``window`` for a scene on the device,
     and the cache records it was interpolated from; ``stages`` (the plan)
     says which cache stages run. ``records`` (of an earlier view of the
     same lit scene) are kept: only the shading points they do not cover
-    get new cache points and gathering. ``should_stop`` is polled between
+    get new cache points and gathering. ``held_samples`` keeps the cache
+    points of earlier renders, taken again where the shading points are
+    the same. ``should_stop`` is polled between
     the stages and between gather batches (RenderCancelled); ``say`` is
     told the name of each stage as it starts (the status line)."""
     say = say or (lambda text: None)
@@ -93,7 +96,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     indirect = caustic = None
     if "final_gather" in stages and n:
         irradiance, records = _cached_irradiance(device, buffers, points, settings, maps, scene_defines, timer,
-                                                 should_stop, records, stats, say)
+                                                 should_stop, records, stats, say, held_samples or samples.HeldSamples())
         indirect = points.scatter(irradiance)
         check_stop(should_stop)
     if "caustics" in stages and n:
@@ -112,7 +115,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
 
 def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: RenderSettings, maps: PhotonMaps,
                        scene_defines: dict, timer: StageTimer, should_stop, records: CacheRecords | None,
-                       stats: dict, say) -> tuple[cl.Buffer, CacheRecords]:
+                       stats: dict, say, held_samples: samples.HeldSamples) -> tuple[cl.Buffer, CacheRecords]:
     """Indirect irradiance (float4 per shading point) and the records it
     comes from: cache points chosen among the points ``records`` leave
     uncovered (all of them without records), gathered, clamped, and
@@ -134,8 +137,9 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         seeds = settings.cache_seeds if index is None else max(1, round(settings.cache_seeds * todo.count / n))
         say("cache points")
         with timer.stage("sample_points"):
-            chosen = samples.select(device, todo.pos, todo.nrm, todo.pixel, todo.count, todo.width, todo.height,
-                                    min(seeds, todo.count), alpha=settings.cache_alpha, seed=settings.seed)
+            chosen, samples_reused = held_samples.select(device, todo.pos, todo.nrm, todo.pixel, todo.count,
+                                                         todo.width, todo.height, min(seeds, todo.count),
+                                                         settings.cache_alpha, settings.seed)
         check_stop(should_stop)
         with timer.stage("cut"):
             the_cut, gather_cut, cut_reused = _cut(device, maps, settings)
@@ -150,7 +154,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         with timer.stage("interpolate"):
             clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
         new = CacheRecords(chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count)
-        stats.update(sample_points=chosen.count, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
+        stats.update(sample_points=chosen.count, sample_points_reused=samples_reused, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
                      outliers_clamped=outliers_clamped)
     merged = _merged(device, records if kept else None, new)
     stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}

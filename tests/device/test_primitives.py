@@ -53,3 +53,22 @@ def test_device_arrays_are_one_dimensional_views_of_their_buffers(device):
     view = device.view(array.data, 4, np.int32)
     np.testing.assert_array_equal(device.get(view), values[:2].view(np.int32))
     assert len(device.array(0, np.float32)) == 1
+
+
+@pytest.mark.parametrize("n, at", [(1, 0), (255, 254), (256, 255), (257, 256), (70000, 69999), (70000, 12345)])
+def test_same_ints_finds_one_differing_bit_anywhere(device, n, at):
+    a = np.random.default_rng(n).integers(-2**31, 2**31, n, dtype=np.int64).astype(np.int32)
+    b = a.copy()
+    assert primitives.same_ints(device, device.to_device(a), device.to_device(b), n)
+    b[at] ^= 1 << 17
+    assert not primitives.same_ints(device, device.to_device(a), device.to_device(b), n)
+    # only the first n count
+    assert primitives.same_ints(device, device.to_device(a), device.to_device(b), at)
+
+
+def test_same_ints_compares_float_bits_not_values(device):
+    a = np.array([np.nan, 0.0, 1.0], np.float32)
+    assert primitives.same_ints(device, device.to_device(a), device.to_device(a.copy()), 3)  # NaN is itself
+    assert not primitives.same_ints(device, device.to_device(a), device.to_device(np.array([np.nan, -0.0, 1.0],
+                                                                                       np.float32)), 3)
+    assert primitives.same_ints(device, device.empty(4), device.empty(4), 0)

@@ -124,6 +124,37 @@ def select(device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n:
                      primitives.gather_rows(device, nrm, index, m), m, frame, result, kept, n, stats)
 
 
+class HeldSamples:
+    """The sample sets of the latest renders (a coarse and a full pass),
+    each with the shading points it was chosen among. The choice is a
+    function of those points and its own settings alone, not of the lights
+    or of what the materials reflect: a render whose shading points come
+    out the same, bit for bit, as an earlier one's (after a light edit, or
+    a material edit that moves none of them) keeps that render's samples
+    instead of seeding and clustering again."""
+
+    KEEP = 2
+
+    def __init__(self):
+        self._held: list[tuple[tuple, tuple, SampleSet]] = []  # (key, point buffers, samples), latest last
+
+    def select(self, device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: int, width: int,
+               height: int, count: int, alpha: float, seed: int) -> tuple[SampleSet, bool]:
+        """``select``'s samples for these points, and whether they are an
+        earlier render's (the points compared on the device)."""
+        key = (device, n, width, height, count, alpha, seed, MAX_ITERATIONS, CONVERGE_FRACTION)
+        for entry in self._held:
+            held_key, (held_pos, held_nrm, held_pixels), chosen = entry
+            if held_key == key and all(primitives.same_ints(device, a, b, ints) for a, b, ints in
+                                       ((pos, held_pos, 4 * n), (nrm, held_nrm, 4 * n), (pixels, held_pixels, 2 * n))):
+                self._held.remove(entry)
+                self._held.append(entry)
+                return chosen, True
+        chosen = select(device, pos, nrm, pixels, n, width, height, count, alpha=alpha, seed=seed)
+        self._held = self._held[-(self.KEEP - 1):] + [(key, (pos, nrm, pixels), chosen)]
+        return chosen, False
+
+
 def select_samples(device: Device, positions, normals, pixels, width: int, height: int, count: int,
                    alpha: float | None = None, max_iterations: int = MAX_ITERATIONS,
                    converge_fraction: float = CONVERGE_FRACTION, seed: int = 0) -> SampleSet:

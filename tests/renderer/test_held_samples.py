@@ -1,0 +1,72 @@
+"""Cache points kept across renders whose shading points come out the same
+(gpu_core/gi/cache/samples.py HeldSamples): a light or material colour edit
+gathers again at the cache points of the last render instead of seeding and
+clustering anew, and its image is the fresh render's, bit for bit."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from test_threads import GI, scene
+
+from gpu_core.renderer import Renderer
+from gpu_core.scene import LIGHT_POINT, Lights, Materials
+
+SETTINGS = dataclasses.replace(GI, cache_seeds=120, gather_rays=16, samples=2, cache_reuse=False)
+
+
+def _brighter(s):
+    return dataclasses.replace(s, lights=Lights.make([dict(kind=LIGHT_POINT, position=(0.2, 0.1, 0.5),
+                                                           power=(300, 200, 100))]))
+
+
+def _recoloured(s):
+    return dataclasses.replace(s, materials=Materials.make([dict(base_color=(0.7, 0.2, 0.1)),
+                                                            dict(base_color=(0.9,) * 3, metallic=1.0, roughness=0.0)]))
+
+
+def _kept(result) -> bool:
+    return result.stats["gi"]["sample_points_reused"]
+
+
+def test_a_light_edit_keeps_the_cache_points_and_gives_the_fresh_image(device):
+    renderer = Renderer(device)
+    first = renderer.render(scene(True, 32), SETTINGS)
+    assert not _kept(first) and "sample_points" in first.stats["plan"]
+    edited = _brighter(scene(True, 32))
+    after = renderer.render(edited, SETTINGS)
+    assert _kept(after) and "sample_points_reused" in after.stats["plan"]
+    assert after.stats["gi"]["sample_points"] == first.stats["gi"]["sample_points"]
+    fresh = Renderer(device).render(edited, SETTINGS)
+    assert not _kept(fresh)
+    np.testing.assert_array_equal(after.passes["Combined"], fresh.passes["Combined"])
+    assert not np.array_equal(after.passes["Combined"], first.passes["Combined"])
+
+
+def test_a_material_colour_edit_keeps_the_cache_points_and_gives_the_fresh_image(device):
+    renderer = Renderer(device)
+    renderer.render(scene(True, 32), SETTINGS)
+    edited = _recoloured(scene(True, 32))
+    after = renderer.render(edited, SETTINGS)
+    assert _kept(after)
+    np.testing.assert_array_equal(after.passes["Combined"], Renderer(device).render(edited, SETTINGS).passes["Combined"])
+
+
+def test_moved_shading_points_or_another_cache_setting_choose_the_cache_points_again(device):
+    renderer = Renderer(device)
+    renderer.render(scene(True, 32), SETTINGS)
+    moved = scene(True, 32)
+    moved.camera.matrix[0, 3] += 0.01
+    assert not _kept(renderer.render(moved, SETTINGS))
+    assert not _kept(renderer.render(moved, dataclasses.replace(SETTINGS, cache_seeds=100)))
+    assert not _kept(renderer.render(moved, dataclasses.replace(SETTINGS, cache_alpha=0.3)))
+
+
+def test_the_coarse_and_the_full_pass_each_keep_their_own_cache_points(device):
+    renderer = Renderer(device)
+    coarse, full = scene(True, 16), scene(True, 32)
+    renderer.render(coarse, SETTINGS)
+    renderer.render(full, SETTINGS)
+    assert _kept(renderer.render(_brighter(coarse), SETTINGS))
+    assert _kept(renderer.render(_brighter(full), SETTINGS))
