@@ -94,8 +94,9 @@ class RenderSettings:
                               "grouping cache points (alpha, times the largest side of the box of the shading "
                               "points)" + _GI_ONLY, panel="gi", minimum=0.0, soft_max=10.0)
     cache_reuse: bool = knob(True, "Reuse Cache Across Views", "Keep the irradiance records in world space when only "
-                             "the view changes: a new view gathers only where they do not cover it (faster and "
-                             "steadier while orbiting; off: every view is cached from scratch, as a fresh render)"
+                             "the view changes: a new view gathers only where they do not cover it, and start "
+                             "choosing cache points from the last render's after an edit (faster and steadier while "
+                             "orbiting or moving objects; off: every view is cached from scratch, as a fresh render)"
                              + _GI_ONLY, panel="gi", text="Reuse Across Views")
 
     light_samples: int = internal(1)  # shadow rays per light at each diffuse point

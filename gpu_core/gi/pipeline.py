@@ -32,6 +32,8 @@ from . import cut, gather, shading_points
 from .cache import interpolation, outliers, samples
 
 
+# what the stats tell of the choice of cache points (samples.select)
+_SELECTION_STATS = ("warm_start", "iterations", "changed_fraction", "converged", "restarts", "empty_clusters")
 # gather streams set aside per record: new records of a later view draw the streams after the kept ones'
 _STREAMS = 7919
 
@@ -139,7 +141,8 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         with timer.stage("sample_points"):
             chosen, samples_reused = held_samples.select(device, todo.pos, todo.nrm, todo.pixel, todo.count,
                                                          todo.width, todo.height, min(seeds, todo.count),
-                                                         settings.cache_alpha, settings.seed)
+                                                         settings.cache_alpha, settings.seed,
+                                                         warm=settings.cache_reuse)
         check_stop(should_stop)
         with timer.stage("cut"):
             the_cut, gather_cut, cut_reused = _cut(device, maps, settings)
@@ -154,7 +157,8 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         with timer.stage("interpolate"):
             clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
         new = CacheRecords(chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count)
-        stats.update(sample_points=chosen.count, sample_points_reused=samples_reused, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
+        stats.update(sample_points=chosen.count, sample_points_reused=samples_reused,
+                     selection={key: chosen.stats.get(key) for key in _SELECTION_STATS}, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
                      outliers_clamped=outliers_clamped)
     merged = _merged(device, records if kept else None, new)
     stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}

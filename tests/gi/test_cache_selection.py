@@ -8,7 +8,7 @@ from cache_shapes import shading_points
 
 from gpu_core.gi.cache import clusters
 from gpu_core.gi.cache import seeding as cache_seeding
-from gpu_core.gi.cache.samples import ALPHA0, select_samples
+from gpu_core.gi.cache.samples import ALPHA0, WARM_ITERATIONS, HeldSamples, select_samples
 from gpu_core.device.layout import float4_rows as float4
 from gpu_core.gi.cache.frame import Frame
 
@@ -233,6 +233,51 @@ def test_more_iterations_lower_the_total_error_to_the_centres(device):
         samples = select_samples(device, pos, nrm, pix, SIZE, SIZE, 150, max_iterations=cap, converge_fraction=0.0)
         totals.append(all_eps(samples, pos, nrm)[np.arange(len(pos)), samples.cluster_of].sum())
     assert totals[1] < totals[0]
+
+
+# -- cache points kept from one render to the next --------------------------------
+
+
+def held_select(device, held, pos, nrm, pix, count, warm=True):
+    """HeldSamples.select on host arrays (alpha ALPHA0)."""
+    buffers = (device.to_device(float4(pos)), device.to_device(float4(nrm)), device.to_device(pix))
+    return held.select(device, *buffers, len(pos), SIZE, SIZE, count, ALPHA0, 0, warm=warm)
+
+
+def test_the_same_points_get_the_same_samples_back(device):
+    held = HeldSamples()
+    pos, nrm, pix = shading_points("box", SIZE, SIZE)
+    first, reused = held_select(device, held, pos, nrm, pix, 150)
+    again, reused_again = held_select(device, held, pos.copy(), nrm.copy(), pix.copy(), 150)
+    assert not reused and reused_again and again is first
+    nudged = pos.copy()
+    nudged[7, 0] = np.nextafter(nudged[7, 0], np.float32(np.inf))  # one bit of one point
+    assert not held_select(device, held, nudged, nrm, pix, 150, warm=False)[1]
+
+
+@pytest.mark.parametrize("shape", ["two_planes", "box"])
+def test_a_warm_start_from_moved_points_assigns_each_to_its_nearest_centre(device, shape):
+    held = HeldSamples()
+    held_select(device, held, *shading_points(shape, SIZE, SIZE), 200)
+    # the same view of the scene moved: a new frame, every point changed
+    pos, nrm, pix = shading_points(shape, SIZE, SIZE, offset=(0.03, -0.02, 0.05))
+    samples, reused = held_select(device, held, pos, nrm, pix, 200)
+    assert not reused and samples.stats["warm_start"] and samples.stats["iterations"] <= WARM_ITERATIONS
+    assert samples.count == 200
+    to_centre = all_eps(samples, pos, nrm)
+    nearest, clear = tie_choice(to_centre)
+    np.testing.assert_array_equal(samples.cluster_of[clear], nearest[clear])
+    assert clear.mean() > 0.99
+
+
+def test_samples_fewer_than_asked_or_warm_off_start_from_new_seeds(device):
+    held = HeldSamples()
+    pos, nrm, pix = shading_points("plane", SIZE, SIZE)
+    coinciding = (np.repeat(pos[:10], 8, axis=0), np.repeat(nrm[:10], 8, axis=0), np.repeat(pix[:10], 8, axis=0))
+    first, _ = held_select(device, held, *coinciding, 20)
+    assert first.count < 20  # ten distinct points make ten clusters at most
+    assert not held_select(device, held, pos[:80], nrm[:80], pix[:80], 20)[0].stats["warm_start"]
+    assert not held_select(device, held, pos[:90], nrm[:90], pix[:90], 20, warm=False)[0].stats["warm_start"]
 
 
 # -- degenerate inputs ----------------------------------------------------------------

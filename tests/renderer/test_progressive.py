@@ -55,14 +55,15 @@ def test_a_pass_after_the_first_reuses_the_gi_cache_and_gives_the_image_of_a_fre
 
 
 def test_edits_of_a_render_stopped_before_its_upload_reach_the_next_render(device):
+    afresh = dataclasses.replace(GI, cache_reuse=False)  # cache points chosen afresh, as the fresh render's
     renderer = Renderer(device)
-    renderer.render(scene(False, 16), GI)
+    renderer.render(scene(False, 16), afresh)
     moved = scene(True, 16)  # a mirror panel added: geometry and materials
     with pytest.raises(RenderCancelled):  # stopped at the first poll, before the upload
-        renderer.render(moved, GI, edits={"geometry", "materials"}, should_stop=lambda: True)
-    after = renderer.render(moved, GI, edits=set())
+        renderer.render(moved, afresh, edits={"geometry", "materials"}, should_stop=lambda: True)
+    after = renderer.render(moved, afresh, edits=set())
     assert "kdtree" in after.stats["plan"]
-    np.testing.assert_array_equal(after.passes["Combined"], Renderer(device).render(moved, GI).passes["Combined"])
+    np.testing.assert_array_equal(after.passes["Combined"], Renderer(device).render(moved, afresh).passes["Combined"])
 
 
 def test_a_static_scene_gives_the_same_image_frame_after_frame_held_or_fresh(device):

@@ -57,7 +57,13 @@ def test_an_edit_of_the_lit_scene_drops_the_records(device):
     renderer.render(first, SETTINGS)
     after = renderer.render(brighter, SETTINGS)
     assert "cache_records_reused" not in after.stats["plan"] and after.stats["gi"]["records"]["kept"] == 0
-    np.testing.assert_array_equal(after.passes["Combined"], Renderer(device).render(brighter, SETTINGS).passes["Combined"])
+    assert after.stats["gi"]["records"]["new"] == after.stats["gi"]["sample_points"]
+    # every point is gathered again; k-means starts from the last view's cache points (test_held_samples.py)
+    assert after.stats["gi"]["selection"]["warm_start"]
+    fresh = Renderer(device).render(brighter, SETTINGS).passes["Combined"][..., :3]
+    kept = after.passes["Combined"][..., :3]
+    assert abs(kept.mean() / fresh.mean() - 1.0) < 0.02
+    assert np.percentile(np.abs(kept - fresh) / np.maximum(fresh, 1e-3), 95) < 0.1
 
 
 def test_records_beyond_the_cap_are_not_held_and_the_next_view_starts_afresh(device, monkeypatch):

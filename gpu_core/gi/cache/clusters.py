@@ -46,12 +46,20 @@ def _k(device: Device, name: str):
     return device.kernel(_PROGRAM, name)
 
 
-def cluster(device: Device, pos: cl.Buffer, nrm: cl.Buffer, n: int, seeds: cl.Buffer, k: int,
-            alpha: float, max_iterations: int, converge_fraction: float) -> Clusters:
-    """Cluster ``n`` points (float4 normalised positions/normals) around
-    ``k`` seed points (int buffer of point indices)."""
+def seed_centres(device: Device, pos: cl.Buffer, nrm: cl.Buffer, seeds: cl.Buffer, k: int) -> tuple:
+    """New (positions, normals) float4 buffers of ``k`` centres at the seed
+    points (int buffer of indices into ``pos`` and ``nrm``)."""
     cpos, cnrm = device.empty(16 * k), device.empty(16 * k)
     _k(device, "Cache_seed_centres")(k, seeds, np.int32(k), pos, nrm, cpos, cnrm)
+    return cpos, cnrm
+
+
+def cluster(device: Device, pos: cl.Buffer, nrm: cl.Buffer, n: int, centres: tuple, k: int,
+            alpha: float, max_iterations: int, converge_fraction: float) -> Clusters:
+    """Cluster ``n`` points (float4 normalised positions/normals) around
+    ``k`` starting centres (float4 positions and normals in the points'
+    frame; the buffers are moved with the centres)."""
+    cpos, cnrm = centres
     tree = _CentreTree(device, cpos, k)
     clusters = device.empty(4 * n)
     device.fill(clusters, -1, 4 * n)

@@ -34,6 +34,7 @@ def programs() -> list[tuple[str, dict]]:
 ALPHA0 = 0.6  # default alpha times the largest side of the shading points' box
 MAX_ITERATIONS = 4  # default cap on k-means iterations (gains flatten out after 3-4)
 CONVERGE_FRACTION = 0.01  # k-means stops once at most this fraction of points changed cluster
+WARM_ITERATIONS = 2  # k-means iterations from an earlier render's samples (their centres have settled)
 
 
 @dataclass
@@ -79,14 +80,18 @@ class SampleSet(DevicePoints):
 
 def select(device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: int, width: int, height: int,
            count: int, alpha: float = ALPHA0, max_iterations: int = MAX_ITERATIONS,
-           converge_fraction: float = CONVERGE_FRACTION, seed: int = 0) -> SampleSet:
+           converge_fraction: float = CONVERGE_FRACTION, seed: int = 0,
+           start: "SampleSet | None" = None) -> SampleSet:
     """About ``count`` sample points among ``n`` shading points on the
     device: float4 positions and unit normals, int2 pixels inside a
     ``width`` x ``height`` image (several points per pixel allowed).
     ``alpha`` weighs distance against normal change in eps, relative to the
     largest side of the points' box. Returns one sample per non-empty
     cluster: ``count`` of them (fewer only when there are fewer points, or
-    when identical points tie)."""
+    when identical points tie). With ``start`` (the samples of an earlier
+    render, positions in the frame of ``pos``), k-means starts from them,
+    each a centre, instead of from new seeds, and runs at most
+    WARM_ITERATIONS."""
     if width < 1 or height < 1:
         raise ValueError(f"image size {width} x {height} is empty")
     if count < 1 or max_iterations < 1 or not 0.0 <= converge_fraction <= 1.0:
@@ -105,20 +110,28 @@ def select(device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n:
                          np.zeros(0, np.int32), 0, stats)
     with timer.stage("normalise"):
         normalised = frame.normalise(device, pos, n)
-    with timer.stage("quadtree"):
-        tree = cache_seeding.build(device, normalised, nrm, pixels, n, width, height, alpha)
-    with timer.stage("seeding"):
-        seeds, k = cache_seeding.seed(device, tree, normalised, nrm, count, alpha, seed)
+    if start is None:
+        with timer.stage("quadtree"):
+            tree = cache_seeding.build(device, normalised, nrm, pixels, n, width, height, alpha)
+        with timer.stage("seeding"):
+            seeds, k = cache_seeding.seed(device, tree, normalised, nrm, count, alpha, seed)
+            centres = cache_clusters.seed_centres(device, normalised, nrm, seeds, k)
+        stats.update(quadtree_levels=len(tree.levels), leaf_pixels=1 << tree.leaf_shift, warm_start=False)
+    else:
+        k, max_iterations = start.count, min(max_iterations, WARM_ITERATIONS)
+        centres = (frame.normalise(device, start.pos, k), device.empty(16 * k))
+        device.copy(centres[1], start.nrm, 16 * k)
+        stats.update(warm_start=True)
     with timer.stage("kmeans"):
-        result = cache_clusters.cluster(device, normalised, nrm, n, seeds, k, alpha, max_iterations, converge_fraction)
+        result = cache_clusters.cluster(device, normalised, nrm, n, centres, k, alpha, max_iterations,
+                                        converge_fraction)
     # the samples of the non-empty clusters, in centre order
     kept = np.flatnonzero(result.sample_of >= 0).astype(np.int32)
     index = device.to_device(result.sample_of[kept].astype(np.int32))
     m = len(kept)
     stats.update(
         seeds=k, clusters=m, empty_clusters=k - m, iterations=result.iterations,
-        changed_fraction=result.changed_fraction, converged=bool(result.converged), restarts=result.restarts,
-        quadtree_levels=len(tree.levels), leaf_pixels=1 << tree.leaf_shift)
+        changed_fraction=result.changed_fraction, converged=bool(result.converged), restarts=result.restarts)
     stats["ms"]["total"] = sum(timer.ms.values())
     return SampleSet(device, index, primitives.gather_rows(device, pos, index, m),
                      primitives.gather_rows(device, nrm, index, m), m, frame, result, kept, n, stats)
@@ -131,27 +144,36 @@ class HeldSamples:
     or of what the materials reflect: a render whose shading points come
     out the same, bit for bit, as an earlier one's (after a light edit, or
     a material edit that moves none of them) keeps that render's samples
-    instead of seeding and clustering again."""
+    instead of seeding and clustering again. Where the points differ but
+    the image and settings are the same (an object moved), k-means may
+    start from the last samples instead of new seeds (``warm``): most of
+    them still fit, and it settles in fewer iterations."""
 
     KEEP = 2
 
     def __init__(self):
-        self._held: list[tuple[tuple, tuple, SampleSet]] = []  # (key, point buffers, samples), latest last
+        self._held: list[tuple[tuple, int, tuple, SampleSet]] = []  # (key, points, their buffers, samples), latest last
 
     def select(self, device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: int, width: int,
-               height: int, count: int, alpha: float, seed: int) -> tuple[SampleSet, bool]:
+               height: int, count: int, alpha: float, seed: int, warm: bool = False) -> tuple[SampleSet, bool]:
         """``select``'s samples for these points, and whether they are an
         earlier render's (the points compared on the device)."""
-        key = (device, n, width, height, count, alpha, seed, MAX_ITERATIONS, CONVERGE_FRACTION)
+        key = (device, width, height, count, alpha, seed, MAX_ITERATIONS, CONVERGE_FRACTION)
+        start = None
         for entry in self._held:
-            held_key, (held_pos, held_nrm, held_pixels), chosen = entry
-            if held_key == key and all(primitives.same_ints(device, a, b, ints) for a, b, ints in
-                                       ((pos, held_pos, 4 * n), (nrm, held_nrm, 4 * n), (pixels, held_pixels, 2 * n))):
+            held_key, held_n, (held_pos, held_nrm, held_pixels), chosen = entry
+            if held_key != key:
+                continue
+            if held_n == n and all(primitives.same_ints(device, a, b, ints) for a, b, ints in
+                                   ((pos, held_pos, 4 * n), (nrm, held_nrm, 4 * n), (pixels, held_pixels, 2 * n))):
                 self._held.remove(entry)
                 self._held.append(entry)
                 return chosen, True
-        chosen = select(device, pos, nrm, pixels, n, width, height, count, alpha=alpha, seed=seed)
-        self._held = self._held[-(self.KEEP - 1):] + [(key, (pos, nrm, pixels), chosen)]
+            # a start with fewer samples than asked (clusters lost to ties) would thin out edit after edit
+            start = chosen if warm and chosen.count == count <= n else start
+        chosen = select(device, pos, nrm, pixels, n, width, height, count, alpha=alpha, seed=seed, start=start)
+        self._held = [entry for entry in self._held if entry[0] != key][-(self.KEEP - 1):]
+        self._held.append((key, n, (pos, nrm, pixels), chosen))
         return chosen, False
 
 
