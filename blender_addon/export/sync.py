@@ -222,7 +222,12 @@ class SceneSync:
             geometry = (last.triangles, last.normals, last.uvs, last.material_ids, last.tangents)
         else:
             edits.add("geometry")
-            geometry = _concatenated([instances[key] for key in order])
+            parts = [instances[key] for key in order]
+            geometry = None
+            if last is not None and list(self._instances) == order:
+                geometry = _patched(last, [self._instances[key] for key in order], parts)
+            if geometry is None:
+                geometry = _concatenated(parts)
         materials, lights = Materials.make(table.rows), Lights.make(light_rows)
         if last is None or not (_same_columns(materials, last.materials) and _same_textures(table, last)):
             edits.add("materials")
@@ -264,6 +269,31 @@ def _concatenated(parts: list[_Instance]) -> tuple:
                                    for p in parts])
     return (np.concatenate([p.world for p in parts]), np.concatenate([p.normals for p in parts]),
             np.concatenate([p.uvs for p in parts]), np.concatenate([p.ids for p in parts]).astype(np.int32), tangents)
+
+
+_FIELDS = ("world", "normals", "uvs", "ids", "tangents")  # an instance's arrays, in the scene's order
+
+
+def _patched(last: Scene, old: list[_Instance], new: list[_Instance]) -> tuple | None:
+    """The last scene's geometry arrays with the rows of the instances that
+    changed written in, where every instance kept its triangle count and
+    whether it has tangents: an array none of them changed is the last
+    scene's itself, the others copies (work in proportion to the scene for
+    the copies only, none for the arrays kept). None where the rows moved."""
+    if any(len(a.world) != len(b.world) or (a.tangents is None) != (b.tangents is None) for a, b in zip(old, new)):
+        return None
+    ends = np.cumsum([len(part.world) for part in new])
+    changed = [(end - len(b.world), end, a, b) for end, a, b in zip(ends, old, new) if a is not b]
+    arrays = []
+    for name, whole in zip(_FIELDS, (last.triangles, last.normals, last.uvs, last.material_ids, last.tangents)):
+        edited = [(start, end, getattr(b, name)) for start, end, a, b in changed
+                  if getattr(b, name) is not None and not np.array_equal(getattr(a, name), getattr(b, name))]
+        if edited:
+            whole = whole.copy()
+            for start, end, rows in edited:
+                whole[start:end] = rows
+        arrays.append(whole)
+    return tuple(arrays)
 
 
 def _same_columns(a, b) -> bool:

@@ -45,6 +45,7 @@ class SceneBuffers:
     texture_infos: cl.Buffer
     camera: cl.Buffer  # one Camera row
     world: np.ndarray  # float4: rgb radiance, w = 1 for a transparent film (set per render)
+    sources: tuple = ()  # the host arrays of normals, uvs, material ids and tangents uploaded
 
     def kernel_args(self, transparent: bool = False) -> list:
         """Arguments matching SCENE_PARAMS in shading/scene.h, in order."""
@@ -79,9 +80,7 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
             else:
                 tree = kdtree.build(device, (scene.triangles - tables.center).astype(np.float32), should_stop)
         with timer.stage("upload"):
-            geometry = (tree, device.to_device(float4_rows(scene.normals.reshape(-1, 3))),
-                        device.to_device(np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32)),
-                        device.to_device(scene.material_ids), device.to_device(_corner_tangents(scene)))
+            geometry = (tree, *_attributes(device, scene, old))
     else:
         geometry = (old.tree, old.normals, old.uvs, old.material_ids, old.tangents)
     with timer.stage("upload"):
@@ -103,7 +102,27 @@ def upload(device: Device, scene: Scene, tables: SceneTables, previous: SceneBuf
         device=device, center=tables.center, radius=tables.radius, tree=geometry[0], normals=geometry[1],
         uvs=geometry[2], material_ids=geometry[3], tangents=geometry[4], materials=materials[0], lights=lights[0],
         light_count=lights[1], emit_tris=emitters[0], emit_cdf=emitters[1], emit_count=emitters[2], atlas=materials[1],
-        texture_infos=materials[2], camera=camera, world=np.append(scene.world_color, 0.0).astype(np.float32))
+        texture_infos=materials[2], camera=camera, world=np.append(scene.world_color, 0.0).astype(np.float32),
+        sources=_sources(scene))
+
+
+def _sources(scene: Scene) -> tuple:
+    """The host arrays the triangle attributes are uploaded from."""
+    return (scene.normals, scene.uvs, scene.material_ids, scene.tangents)
+
+
+def _attributes(device: Device, scene: Scene, old: SceneBuffers | None) -> list:
+    """The normals, uvs, material ids and tangents on the device: the
+    buffers of ``old`` for the arrays it was uploaded from (the very same
+    objects: a moved object leaves the others' arrays as they were),
+    uploads of the others."""
+    uploads = (lambda: float4_rows(scene.normals.reshape(-1, 3)),
+               lambda: np.ascontiguousarray(scene.uvs.reshape(-1, 2), np.float32),
+               lambda: scene.material_ids, lambda: _corner_tangents(scene))
+    held = (old.normals, old.uvs, old.material_ids, old.tangents) if old is not None else (None,) * 4
+    sources = old.sources if old is not None else ()
+    return [buffer if i < len(sources) and sources[i] is array else device.to_device(upload())
+            for i, (array, buffer, upload) in enumerate(zip(_sources(scene), held, uploads))]
 
 
 def _corner_tangents(scene: Scene) -> np.ndarray:

@@ -57,7 +57,10 @@ class GeometryMemo:
     repairs counted, keyed by its arrays (by identity) and material count.
     A scene whose arrays are new but of the same shapes (an object moved or
     reshaped in place) has only its rows that differ checked, where neither
-    the last scene nor those rows needed a repair."""
+    the last scene nor those rows needed a repair; an array of the last
+    scene's that it shares, or whose rows are all equal to them, gives its
+    checked array of the last time, the very same object (the upload and
+    the plan's memos then know it unchanged)."""
 
     def __init__(self):
         self._key: tuple = ()
@@ -69,32 +72,36 @@ class GeometryMemo:
         key = (scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.tangents, len(scene.materials))
         if not (len(key) == len(self._key) and all(a is b for a, b in zip(key[:5], self._key[:5]))
                 and key[5] == self._key[5]):
-            rows = self._changed_rows(key)
-            result = self._patched(scene, rows) if rows is not None else None
+            changed = self._changed_rows(key)
+            result = self._patched(scene, *changed) if changed is not None else None
             self._key, self._result = key, result or _checked_geometry(scene)
         *geometry, counts = self._result
         for name, value in counts.items():
             setattr(report, name, value)
         return tuple(geometry)
 
-    def _changed_rows(self, key: tuple) -> np.ndarray | None:
+    def _changed_rows(self, key: tuple) -> tuple[np.ndarray, list[bool]] | None:
         """The triangle rows where ``key``'s arrays differ from the last
-        scene's, when only those need checking: the last scene needed no
-        repair, and every array has its shape and type."""
+        scene's and, per array, whether any of its rows does, when only
+        those rows need checking: the last scene needed no repair, and
+        every array has its shape and type."""
         if not self._result or any(self._result[-1].values()) or self._result[5] or key[5] != self._key[5]:
             return None
         arrays = [np.asarray(a) for a in key[:5]]
         if any(a.ndim == 0 or a.shape != b.shape or a.dtype != b.dtype for a, b in zip(arrays, self._key[:5])):
             return None
-        changed = np.zeros(len(arrays[0]), bool)
+        changed, differs = np.zeros(len(arrays[0]), bool), []
         for new, old in zip(arrays, self._key[:5]):
-            if new.size:
-                changed |= rows_differ(new, old)
-        return np.flatnonzero(changed)
+            rows = rows_differ(new, old) if new.size and new is not old else None
+            differs.append(rows is not None and bool(rows.any()))
+            if differs[-1]:
+                changed |= rows
+        return np.flatnonzero(changed), differs
 
-    def _patched(self, scene: Scene, rows: np.ndarray) -> tuple | None:
-        """The last result with ``rows`` checked again and written in, or
-        None where one of them needs a repair (the whole scene is checked)."""
+    def _patched(self, scene: Scene, rows: np.ndarray, differs: list[bool]) -> tuple | None:
+        """The last result with ``rows`` checked again and written into
+        copies of the arrays that ``differs`` names, or None where one of
+        them needs a repair (the whole scene is checked)."""
         has_tangents = np.size(scene.tangents) > 0
         part = replace(scene, triangles=scene.triangles[rows], normals=scene.normals[rows], uvs=scene.uvs[rows],
                        material_ids=scene.material_ids[rows],
@@ -102,10 +109,12 @@ class GeometryMemo:
         *checked, needs_default, counts = _checked_geometry(part)
         if needs_default or any(counts.values()):
             return None
-        geometry = [array.copy() for array in self._result[:5]]
-        for whole, rows_checked in zip(geometry, checked):
-            if len(whole):
+        geometry = []
+        for whole, rows_checked, differ in zip(self._result[:5], checked, differs):
+            if differ:
+                whole = whole.copy()
                 whole[rows] = rows_checked
+            geometry.append(whole)
         return (*geometry, False, counts)
 
 

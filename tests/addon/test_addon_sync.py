@@ -130,6 +130,23 @@ def test_an_edit_exports_only_what_it_changed_and_gives_the_fresh_export(room, e
         assert scene.triangles is first.triangles and scene.material_ids is first.material_ids
 
 
+@pytest.mark.parametrize("edit, kept", [
+    (_move_cube, ("normals", "uvs", "material_ids")),  # moved along x: its normals are the same
+    (lambda bpy: setattr(bpy.data.objects["Cube"].rotation_euler, "z", 0.4), ("uvs", "material_ids")),
+], ids=["translate", "rotate"])
+def test_a_moved_object_leaves_the_arrays_it_did_not_change_shared_and_writes_its_rows_into_copies(room, edit, kept):
+    bpy, edits, *_ = room
+    sync = SceneSync()
+    first, _ = _synced(bpy, sync)
+    triangles = first.triangles.copy()
+    scene, changed = _synced(bpy, sync, edits.apply(lambda: edit(bpy)))
+    assert changed == {"geometry"}
+    _assert_same_scene(scene, export_scene(bpy.context.evaluated_depsgraph_get()))
+    for name in ("triangles", "normals", "uvs", "material_ids"):
+        assert (getattr(scene, name) is getattr(first, name)) == (name in kept), name
+    np.testing.assert_array_equal(first.triangles, triangles)  # the last scene is not written into
+
+
 def test_a_sync_with_no_edit_changes_nothing_and_shares_every_table(room):
     bpy, edits, *_ = room
     sync = SceneSync()

@@ -49,3 +49,19 @@ def test_a_camera_move_uploads_only_the_camera(device):
     moved = renderer.render(dataclasses.replace(scene, camera=camera), GI).stats["transfers"]
     # the camera row and the cache's small tables; no triangles, no photons
     assert moved["to_device"] < 16 * 1024
+
+
+def test_a_move_uploads_the_moved_corners_and_keeps_the_other_attribute_buffers(device):
+    renderer = Renderer(device)
+    scene = mirrored_room()
+    renderer.render(scene, GI)
+    held = renderer._buffers
+    triangles = scene.triangles.copy()
+    triangles[-2:] += (0.05, 0.0, 0.0)  # the mirror panel moved; every other array shared
+    after = renderer.render(dataclasses.replace(scene, triangles=triangles), GI)
+    assert "kdtree_overlay" in after.stats["plan"]
+    buffers = renderer._buffers
+    for name in ("normals", "uvs", "material_ids", "tangents"):
+        assert getattr(buffers, name) is getattr(held, name), name
+    # the moved triangles' overlay tree, the light and emitter tables and the cache's small tables
+    assert after.stats["transfers"]["to_device"] < 16 * 1024
