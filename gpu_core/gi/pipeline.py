@@ -139,10 +139,12 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         seeds = settings.cache_seeds if index is None else max(1, round(settings.cache_seeds * todo.count / n))
         say("cache points")
         with timer.stage("sample_points"):
-            chosen, samples_reused = held_samples.select(device, todo.pos, todo.nrm, todo.pixel, todo.count,
-                                                         todo.width, todo.height, min(seeds, todo.count),
-                                                         settings.cache_alpha, settings.seed,
-                                                         warm=settings.cache_reuse)
+            args = (device, todo.pos, todo.nrm, todo.pixel, todo.count, todo.width, todo.height, min(seeds, todo.count))
+            if index is None:
+                chosen, samples_reused = held_samples.select(*args, settings.cache_alpha, settings.seed,
+                                                             warm=settings.cache_reuse)
+            else:  # the points the records leave uncovered: a new subset each view, not held
+                chosen, samples_reused = samples.select(*args, settings.cache_alpha, seed=settings.seed), False
         check_stop(should_stop)
         with timer.stage("cut"):
             the_cut, gather_cut, cut_reused = _cut(device, maps, settings)

@@ -110,3 +110,20 @@ def test_with_reuse_off_a_move_chooses_its_cache_points_afresh(device):
     after = renderer.render(moved, SETTINGS)
     assert not after.stats["gi"]["selection"]["warm_start"]
     np.testing.assert_array_equal(after.passes["Combined"], Renderer(device).render(moved, SETTINGS).passes["Combined"])
+
+
+def test_a_light_edit_after_a_turned_view_starts_from_the_cache_points_of_the_view_before(device):
+    # as the viewport renders: a coarse pass (a share of the photons where they are traced) and a full
+    # one of each view; the turned view's passes choose cache points only where the records leave
+    # gaps (a subset each, not held)
+    reuse = dataclasses.replace(SETTINGS, cache_reuse=True)
+    passes = ((16, dataclasses.replace(reuse, photon_share=0.125)), (32, reuse))
+    renderer = Renderer(device)
+    for size, settings in passes:
+        renderer.render(scene(True, size), settings)
+    for size, settings in passes:
+        turned = scene(True, size)
+        turned.camera.matrix[0, 3] += 0.2
+        assert "cache_records_reused" in renderer.render(turned, settings).stats["plan"]
+    edited = renderer.render(_brighter(turned), reuse)
+    assert edited.stats["gi"]["records"]["kept"] == 0 and edited.stats["gi"]["selection"]["warm_start"]
