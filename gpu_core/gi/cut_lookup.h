@@ -34,14 +34,17 @@ inline float3 CutLookup_irradiance(const Cut *cut, float3 y, float3 n_y) {
     if (cut->count <= 0) return none;
     Knn h;
     PointTree_knn(&cut->tree, y, min(CUT_NEIGHBOURS, cut->count), INFINITY, &h);
-    Knn_sort(&h);
     float3 sum = none;
     float total = 0.0f;
     int nearest_facing = -1;
+    ulong nearest_key = ULONG_MAX; /* of the nearest facing node (then lowest index) */
     for (int i = 0; i < Knn_count(&h); ++i) {
         int j = as_int(cut->tree.points[Knn_id(&h, i)].w);
         float facing = dot(cut->normal[j].xyz, n_y);
-        if (facing > 0.0f && nearest_facing < 0) nearest_facing = j;
+        if (facing > 0.0f && h.key[i] < nearest_key) {
+            nearest_key = h.key[i];
+            nearest_facing = j;
+        }
         float size = fmax(cut->centre[j].w, 1e-30f);
         float x2 = Knn_d2(&h, i) / (size * size);
         float w = fmax(1.0f - x2, 0.0f) * fmax(facing, 0.0f);
