@@ -111,9 +111,9 @@ class Cut:
         return dev.read_xyz(out, n)
 
 
-def with_caustics(cut: Cut, caustic_map: PointTree | None, k: int, max_radius: float | None = None) -> Cut:
+def with_caustics(cut: Cut, caustic_map: PointTree | None, k: int) -> Cut:
     """The cut as final gathering reads it: each node's irradiance plus the
-    caustic map's ``k``-photon estimate (within ``max_radius``) at its centre, so a gather hit looks
+    caustic map's ``k``-photon estimate at its centre, so a gather hit looks
     up one structure (the method of precomputed irradiance at photons: light
     seen after a diffuse bounce is smooth at the cut's scale). Caustics seen
     directly keep their own estimate per shading point. The same cut when
@@ -122,7 +122,7 @@ def with_caustics(cut: Cut, caustic_map: PointTree | None, k: int, max_radius: f
         return cut
     device, n = cut.device, cut.count
     caustic, total = device.empty(16 * n), device.empty(16 * n)
-    caustic_map.irradiance_on_device(cut.centre, cut.normal, n, k, caustic, max_radius=max_radius)
+    caustic_map.irradiance_on_device(cut.centre, cut.normal, n, k, caustic)
     device.kernel(_PROGRAM, "Cut_add_irradiance", lookup_defines(cut.k))(n, cut.irradiance, caustic, np.int32(n), total)
     return replace(cut, irradiance=total, stats={**cut.stats, "caustics_in_nodes": True})
 

@@ -105,8 +105,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
         say("caustics")
         with timer.stage("caustics"):
             estimate = device.empty(16 * n)
-            maps.caustic_map.irradiance_on_device(points.pos, points.nrm, n, settings.photon_k, estimate,
-                                                  max_radius=maps.caustic_search_radius())
+            maps.caustic_map.irradiance_on_device(points.pos, points.nrm, n, settings.photon_k, estimate)
             caustic = points.scatter(estimate)
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
     # glossy paths read the diffuse light where they land from the cut
@@ -198,8 +197,7 @@ def _cut(device: Device, maps: PhotonMaps, settings: RenderSettings) -> tuple:
     reused = key in maps.derived
     if not reused:
         the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
-        maps.derived[key] = (the_cut, cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k,
-                                                        maps.caustic_search_radius()))
+        maps.derived[key] = (the_cut, cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k))
     return (*maps.derived[key], reused)
 
 

@@ -30,9 +30,6 @@ from .emit import MAPS, Emitter, allocate, emitter_powers, maps_needed
 _PROGRAM = "photons/photon_trace.cl"
 STORE_GUESS = 3  # stored photons per emitted one, first guess of the global buffer
 MAX_BOUNCES = 8  # scattering events of one photon path
-# caustic estimates search at most this many times the radius that holds photon_k photons where the
-# caustic map is as dense as at its median (Jensen's maximum search radius)
-CAUSTIC_SEARCH_SCALE = 2.0
 
 
 @dataclass
@@ -46,18 +43,6 @@ class PhotonMaps:
     # what is computed from the maps alone and kept with them: the
     # illumination cut by (k, threshold), the same for every view (gi/cut.py)
     derived: dict = field(default_factory=dict)
-
-    def caustic_search_radius(self) -> float | None:
-        """How far a caustic estimate looks for its photons: CAUSTIC_SEARCH_SCALE
-        times the caustic map's own radius (None, no bound, without one).
-        Where fewer photons lie within it, the estimate spreads them over
-        that disk; a point far from every caustic finds none and ends its
-        search early, instead of spreading the nearest k photons, metres
-        away, over a disk of metres (a faint glow, and the costliest search)."""
-        tree = self.caustic_map
-        if tree is None or not tree.radius > 0.0:
-            return None
-        return CAUSTIC_SEARCH_SCALE * tree.radius
 
 
 def programs(scene_defines: dict) -> list[tuple[str, dict]]:

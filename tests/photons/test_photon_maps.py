@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from scenes_py import camera_looking_down, make_scene, plane_scene, quad
 
-from gpu_core.device.layout import float4_rows
 from gpu_core.photons import trace_photon_maps
 from gpu_core.renderer import Renderer
 from gpu_core.settings import RenderSettings
@@ -180,27 +179,6 @@ def test_glass_sphere_focuses_a_caustic(device):
     # the sphere focuses: the photons crowd near its axis more than the bare cone would
     r = np.hypot(pts[:, 0], pts[:, 1])
     assert np.median(r) < 0.5 * 4 * np.tan(0.2)
-
-
-def test_caustic_estimates_look_within_twice_the_maps_radius_and_find_nothing_far_away(device):
-    lights = Lights.make([dict(kind=LIGHT_SPOT, position=(0, 0, 4), power=(100, 100, 100), spot_angle=0.4)])
-    glass = sphere((0, 0, 1.0), 0.5)
-    scene = plane_scene(lights, extra_tris=[glass], extra_materials=[dict(base_color=(1, 1, 1), transmission=1.0, ior=1.5, roughness=0.0)])
-    maps = trace_photon_maps(device, scene, global_photons=2000, caustic_photons=20000, seed=2)
-    tree = maps.caustic_map
-    assert tree.radius > 0 and maps.caustic_search_radius() == pytest.approx(2.0 * tree.radius)
-    # the focus under the sphere and a point of the plane far from every caustic photon
-    far = np.hypot(*(tree.positions()[:, :2] + maps.center[:2]).T).max() + 4 * maps.caustic_search_radius()
-    points = np.array([[0.0, 0.0, 0.0], [far, 0.0, 0.0]]) - maps.center
-    estimates = {}
-    for bound in (None, maps.caustic_search_radius()):
-        out = device.empty(32)
-        tree.irradiance_on_device(device.to_device(float4_rows(points)), device.to_device(float4_rows([UP, UP])), 2, 32,
-                                  out, max_radius=bound)
-        estimates[bound] = device.read(out, (2, 4), np.float32)[:, :3]
-    unbounded, bounded = estimates[None], estimates[maps.caustic_search_radius()]
-    np.testing.assert_array_equal(bounded[0], unbounded[0])  # its 32 nearest photons lie well within
-    assert (unbounded[1] > 0).all() and (bounded[1] == 0).all()
 
 
 def test_a_mirror_casts_its_share_of_the_light_as_a_caustic(device):
