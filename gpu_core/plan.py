@@ -6,7 +6,10 @@ renders (``Held``) and the edits since then, and decides: the scene parts
 to upload, the stages that run and what they reuse (and why), the kernel
 features the scene needs, the photon maps, the programs to build, and the
 device memory all of it takes, GI included, so that a budget error comes
-before any kernel fails. The stages read the plan; none decides again. The
+before any kernel fails. The stages read the plan; none decides again, but
+for one thing only tracing tells: the cache points of an earlier render are
+kept when the shading points come out the same (gi/cache/samples.py
+HeldSamples; the stats' plan then names ``sample_points_reused``). The
 render stats print it (``Plan.stages``).
 """
 

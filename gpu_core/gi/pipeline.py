@@ -98,7 +98,8 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     indirect = caustic = None
     if "final_gather" in stages and n:
         irradiance, records = _cached_irradiance(device, buffers, points, settings, maps, scene_defines, timer,
-                                                 should_stop, records, stats, say, held_samples or samples.HeldSamples())
+                                                 should_stop, records, stats, say,
+                                                 held_samples or samples.HeldSamples())
         indirect = points.scatter(irradiance)
         check_stop(should_stop)
     if "caustics" in stages and n:
@@ -160,7 +161,8 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
             clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
         new = CacheRecords(chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count)
         stats.update(sample_points=chosen.count, sample_points_reused=samples_reused,
-                     selection={key: chosen.stats.get(key) for key in _SELECTION_STATS}, cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
+                     selection={key: chosen.stats.get(key) for key in _SELECTION_STATS},
+                     cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
                      outliers_clamped=outliers_clamped)
     merged = _merged(device, records if kept else None, new)
     stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}

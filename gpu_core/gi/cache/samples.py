@@ -147,12 +147,15 @@ class HeldSamples:
     instead of seeding and clustering again. Where the points differ but
     the image and settings are the same (an object moved), k-means may
     start from the last samples instead of new seeds (``warm``): most of
-    them still fit, and it settles in fewer iterations."""
+    them still fit, and it settles in fewer iterations. (The cache points
+    of the gaps kept records leave are a new subset each view: the
+    pipeline chooses them with ``select`` and does not hold them.)"""
 
     KEEP = 2
 
     def __init__(self):
-        self._held: list[tuple[tuple, int, tuple, SampleSet]] = []  # (key, points, their buffers, samples), latest last
+        # (key, point count, the points' buffers, samples), the latest last
+        self._held: list[tuple[tuple, int, tuple, SampleSet]] = []
 
     def select(self, device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: int, width: int,
                height: int, count: int, alpha: float, seed: int, warm: bool = False) -> tuple[SampleSet, bool]:
