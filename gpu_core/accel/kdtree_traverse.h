@@ -48,9 +48,11 @@ inline bool KdTree_triangle(const KdRay *ray, float4 v0, float4 v1, float4 v2,
                             float tmin, float tmax, float *t, float *u,
                             float *v) {
 #pragma OPENCL FP_CONTRACT OFF
-    float4 a = shuffle(v0 - ray->org, ray->perm);
-    float4 b = shuffle(v1 - ray->org, ray->perm);
-    float4 c = shuffle(v2 - ray->org, ray->perm);
+    float4 d0 = v0 - ray->org, d1 = v1 - ray->org, d2 = v2 - ray->org;
+    int kx = ray->perm.x, ky = ray->perm.y, kz = ray->perm.z;
+    float4 a = (float4)(Axis_of(d0, kx), Axis_of(d0, ky), Axis_of(d0, kz), 0.0f);
+    float4 b = (float4)(Axis_of(d1, kx), Axis_of(d1, ky), Axis_of(d1, kz), 0.0f);
+    float4 c = (float4)(Axis_of(d2, kx), Axis_of(d2, ky), Axis_of(d2, kz), 0.0f);
     float ax = a.x - ray->sx * a.z, ay = a.y - ray->sy * a.z;
     float bx = b.x - ray->sx * b.z, by = b.y - ray->sy * b.z;
     float cx = c.x - ray->sx * c.z, cy = c.y - ray->sy * c.z;
@@ -100,9 +102,13 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
     float t0 = tmin, t1 = tmax;
     if (!KdTree_clip_root(tree, org, inv_dir, &t0, &t1)) return false;
     KdRay ray = KdTree_ray(org, dir);
-    /* absolute error of (split - org) / dir on each axis */
+    /* per axis: origin, inverse direction and the absolute error of
+     * (split - org) / dir, indexed by a node's axis */
     float3 reach = fmax(fmax(fabs(org), fabs(tree->bmin)), fabs(tree->bmax));
-    float3 slack = KD_T_SLACK * fmax(fmax(reach.x, reach.y), reach.z) * fabs(inv_dir);
+    float3 slack3 = KD_T_SLACK * fmax(fmax(reach.x, reach.y), reach.z) * fabs(inv_dir);
+    float o_axis[3] = {org.x, org.y, org.z};
+    float inv_axis[3] = {inv_dir.x, inv_dir.y, inv_dir.z};
+    float slack[3] = {slack3.x, slack3.y, slack3.z};
     float t_exit = t1;
     int stack_node[KD_MAX_DEPTH];
     float stack_t0[KD_MAX_DEPTH], stack_t1[KD_MAX_DEPTH], stack_exit[KD_MAX_DEPTH];
@@ -113,8 +119,8 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
         /* descend to the first leaf along the ray, stacking the second
          * side of every plane the interval may cross */
         while (n.axis != KD_LEAF) {
-            float inv = Axis_of3(inv_dir, n.axis);
-            float t_split = (n.split - Axis_of3(org, n.axis)) * inv;
+            float inv = inv_axis[n.axis];
+            float t_split = (n.split - o_axis[n.axis]) * inv;
             /* the side the ray is on before the plane: below unless it runs downwards */
             int first = inv < 0.0f ? n.child : node + 1;
             int second = inv < 0.0f ? node + 1 : n.child;
@@ -136,7 +142,7 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
                 n = tree->nodes[node];
                 continue;
             }
-            float err = Axis_of3(slack, n.axis) + KD_T_SLACK * fabs(t_split);
+            float err = slack[n.axis] + KD_T_SLACK * fabs(t_split);
             bool visit_first = t_split + err >= t0;
             bool visit_second = t_split - err <= t1;
             if (visit_first && visit_second) {

@@ -291,15 +291,27 @@ __kernel void PointBuild_small_roots(const __global int *roots, __global BuildNo
     nd.root = r;
     nd.mask = n >= POINT_BUILD_SMALL ? 0xffffffffu : ((1u << n) - 1u);
     nodes[id] = nd;
+    /* along each axis: the points sorted by coordinate, ties by index (a
+     * stable insertion sort), then each one's mask is the points up to it
+     * in that order */
+    float c[POINT_BUILD_SMALL];
+    int order[POINT_BUILD_SMALL];
     for (int a = 0; a < 3; ++a) {
-        for (int j = 0; j < n; ++j) {
-            float s = Axis_of(pts[nd.start + j], a);
-            uint m = 0u;
-            for (int i = 0; i < n; ++i) {
-                float c = Axis_of(pts[nd.start + i], a);
-                if (c < s || (c == s && i <= j)) m |= 1u << i;
+        for (int i = 0; i < n; ++i) {
+            float v = Axis_of(pts[nd.start + i], a);
+            int k = i;
+            while (k > 0 && c[k - 1] > v) {
+                c[k] = c[k - 1];
+                order[k] = order[k - 1];
+                k--;
             }
-            masks[(size_t)r * 3 * POINT_BUILD_SMALL + a * POINT_BUILD_SMALL + j] = m;
+            c[k] = v;
+            order[k] = i;
+        }
+        uint m = 0u;
+        for (int k = 0; k < n; ++k) {
+            m |= 1u << order[k];
+            masks[(size_t)r * 3 * POINT_BUILD_SMALL + a * POINT_BUILD_SMALL + order[k]] = m;
         }
     }
     /* radius estimate: k_hint points in a ball of the local dimension */

@@ -50,6 +50,10 @@ _SIMULATOR_PLATFORMS = ("oclgrind",)
 # elsewhere would otherwise hand compile() a linked program to link again.
 _SEPARATE_PLATFORMS = ("Portable Computing Language",)
 _SEPARATE_MARK = "-DGPUGI_COMPILED_OBJECT=1"
+# PoCL links its builtins after inlining, leaving each dot or fmax a call:
+# there every program starts with the header that inlines them
+_INLINE_BUILTINS_PLATFORMS = ("Portable Computing Language",)
+_INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 
 
 def kernel_cache_dir() -> Path:
@@ -114,6 +118,7 @@ class Programs:
         self.context = context
         self.device = device
         self._separate = device.platform.name.strip() in _SEPARATE_PLATFORMS
+        self._inline_builtins = device.platform.name.strip() in _INLINE_BUILTINS_PLATFORMS
         self._simulator = any(name in device.platform.name.lower() for name in _SIMULATOR_PLATFORMS)
         self.builds: list[BuildRecord] = []
         self._programs: dict[tuple, cl.Program] = {}
@@ -168,6 +173,8 @@ class Programs:
         """The source of ``name``, the options it is built with on this
         device, and its file in the disk cache."""
         source = load_source(name)
+        if self._inline_builtins:
+            source = f'#line 1 "device/{_INLINE_BUILTINS.name}"\n{_INLINE_BUILTINS.read_text()}\n{source}'
         if self._separate:
             options = options + (_SEPARATE_MARK,)
         dev = self.device

@@ -1,0 +1,94 @@
+"""The inlined math builtins (device/pocl_builtins.h, put before every
+program on PoCL) give the builtins' results: the same kernel built with
+them and built plainly by the driver agree, at NaN operands, signed zeros,
+infinities, and at vectors so tiny or huge their squares under- or overflow."""
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+import gpu_core.device.programs as programs_module
+
+_KERNEL = """
+/* every row of `a`, `b` (float4) through the builtins the header replaces;
+ * out holds OUTPUTS float4 per row */
+__kernel void Builtins_probe(const __global float4 *a, const __global float4 *b, __global float4 *out) {
+    int i = get_global_id(0);
+    float4 x = a[i], y = b[i];
+    float3 u = x.xyz, v = y.xyz;
+    __global float4 *o = out + OUTPUTS * i;
+    o[0] = (float4)(fmin(x.x, y.x), fmax(x.x, y.x), fabs(x.x), sqrt(x.x));
+    o[1] = (float4)(fmin(u, v), dot(u, v));
+    o[2] = (float4)(fmax(u, v), dot(x, y));
+    o[3] = (float4)(fmin(u, y.w), length(u));
+    o[4] = (float4)(fmax(u, y.w), clamp(x.x, y.y, y.z));
+    o[5] = (float4)(fabs(u), mix(x.x, y.x, y.w));
+    o[6] = (float4)(cross(u, v), length(x.xy));
+    o[7] = (float4)(normalize(u), (float)clamp((int)x.w, -2, 3));
+    o[8] = (float4)(clamp(u, y.y, y.z), mix(x.y, y.y, 0.25f));
+    o[9] = (float4)(mix(u, v, y.w), (float)(isnan(x.x) + 2 * isinf(x.x) + 4 * isfinite(x.x)));
+    o[10] = fmin(x, y) + fmax(x, 1.0f) * 0.0f;
+}
+"""
+OUTPUTS = 11
+# outputs computed exactly alike (selections, exact operations); the rest may round differently
+_EXACT = [(0, slice(0, 4)), (1, slice(0, 3)), (2, slice(0, 3)), (3, slice(0, 3)), (4, slice(0, 4)), (5, slice(0, 3)),
+          (7, slice(3, 4)), (8, slice(0, 3)), (9, slice(3, 4)), (10, slice(0, 4))]
+
+
+def _rows():
+    """Operands: ordinary values and the edge cases of each builtin."""
+    nan, inf = np.float32(np.nan), np.float32(np.inf)
+    special = [
+        [nan, 1.0, -2.0, 0.0], [1.0, nan, 3.0, 0.0],  # a NaN operand loses in fmin and fmax
+        [-0.0, 0.0, -inf, 5.0], [inf, -inf, 0.0, -7.0],
+        [1e-25, 0.0, 0.0, 0.0], [3e20, 4e20, 0.0, 1.0],  # squares that underflow, overflow
+        [1e-20, 2e-20, -2e-20, 0.0], [0.0, 0.0, 0.0, 0.0], [-4.0, 2.0, 1e-30, 3.0],
+    ]
+    rng = np.random.default_rng(3)
+    ordinary = rng.normal(size=(64, 4)) * rng.choice([1e-3, 1.0, 1e3], size=(64, 1))
+    a = np.vstack([special, ordinary]).astype(np.float32)
+    b = np.vstack([np.roll(special, 3, axis=0), rng.normal(size=(64, 4))]).astype(np.float32)
+    b[:, 1], b[:, 2] = np.minimum(b[:, 1], b[:, 2]), np.maximum(b[:, 1], b[:, 2])  # clamp's bounds in order
+    b[:len(special), 3] = np.nan_to_num(b[:len(special), 3], nan=0.5)
+    return a, b
+
+
+def _run(device, program, a, b):
+    out = np.zeros((len(a), OUTPUTS, 4), np.float32)
+    a_buf, b_buf, out_buf = device.to_device(a), device.to_device(b), device.empty(out.nbytes)
+    program.Builtins_probe(device.queue, (len(a),), None, a_buf, b_buf, out_buf)
+    cl.enqueue_copy(device.queue, out, out_buf)
+    return out
+
+
+@pytest.fixture
+def probe_dir(tmp_path, monkeypatch):
+    (tmp_path / "builtins_probe.cl").write_text(_KERNEL)
+    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", tmp_path)
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+    return tmp_path
+
+
+def test_inlined_builtins_give_the_builtins_results(device, probe_dir):
+    a, b = _rows()
+    ours = _run(device, device.program("builtins_probe.cl", {"OUTPUTS": OUTPUTS}), a, b)
+    plain = cl.Program(device.context, _KERNEL).build(options=["-cl-std=CL1.2", f"-DOUTPUTS={OUTPUTS}"])
+    reference = _run(device, plain, a, b)
+    for row, cols in _EXACT:
+        np.testing.assert_array_equal(ours[:, row, cols], reference[:, row, cols], err_msg=f"output {row}")
+    # the rest to rounding: of the result, or of the operands' products where terms cancel (dot, cross, mix)
+    terms = (np.abs(a) * np.abs(b)).sum(axis=1) + np.abs(a).sum(axis=1) + np.abs(b).sum(axis=1)
+    tolerance = 2e-6 * np.abs(reference) + 4 * np.finfo(np.float32).eps * terms[:, None, None]
+    both_nan = np.isnan(ours) & np.isnan(reference)
+    close = both_nan | (np.abs(ours - reference) <= tolerance) | (ours == reference)
+    assert close.all(), np.argwhere(~close)
+    # the tiny and huge vectors keep their length and direction
+    assert np.all(np.isfinite(ours[4:6, 3, 3])) and np.all(ours[4:6, 3, 3] > 0)
+    np.testing.assert_allclose(np.linalg.norm(ours[4:7, 7, :3], axis=1), 1.0, rtol=1e-6)
+
+
+def test_the_header_goes_before_programs_on_pocl_only(device, probe_dir):
+    source = device.programs._cache_entry("builtins_probe.cl", ())[0]
+    on_pocl = "portable computing language" in device.context.devices[0].platform.name.lower()
+    assert ("#define dot Inline_dot" in source) == on_pocl
