@@ -13,11 +13,17 @@ inline void Sampling_frame(float3 n, float3 *t, float3 *b) {
     *b = (float3)(c, s + n.y * n.y * a, -n.y);
 }
 
+/* (cos, sin) of the angle 2 pi u of a sample: the native functions, whose
+ * error (a few ulp on a CPU, about 1e-6 on a GPU) turns a sampled direction
+ * by far less than its noise, at a third of the accurate ones' cost on PoCL. */
+inline float2 Sampling_turn(float u) {
+    float phi = 2.0f * PI_F * u;
+    return (float2)(native_cos(phi), native_sin(phi));
+}
+
 /* Point in the unit disk (polar mapping). */
 inline float2 Sampling_disk(float u1, float u2) {
-    float r = sqrt(u1);
-    float phi = 2.0f * PI_F * u2;
-    return (float2)(r * cos(phi), r * sin(phi));
+    return sqrt(u1) * Sampling_turn(u2);
 }
 
 /* Cosine-distributed direction around n. */
@@ -35,8 +41,8 @@ inline float3 Sampling_cone(float3 axis, float cos_max, float u1, float u2) {
     Sampling_frame(axis, &t, &b);
     float cos_t = 1.0f - u1 * (1.0f - cos_max);
     float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
-    float phi = 2.0f * PI_F * u2;
-    return normalize(sin_t * cos(phi) * t + sin_t * sin(phi) * b + cos_t * axis);
+    float2 turn = sin_t * Sampling_turn(u2);
+    return normalize(turn.x * t + turn.y * b + cos_t * axis);
 }
 
 /* Uniform point in a triangle as barycentrics (u, v). */

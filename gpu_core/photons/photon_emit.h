@@ -30,8 +30,8 @@ typedef struct {
 inline float3 PhotonEmit_sphere(float u1, float u2) {
     float z = 1.0f - 2.0f * u1;
     float s = sqrt(fmax(0.0f, 1.0f - z * z));
-    float phi = 2.0f * PI_F * u2;
-    return (float3)(s * cos(phi), s * sin(phi), z);
+    float2 turn = s * Sampling_turn(u2);
+    return (float3)(turn.x, turn.y, z);
 }
 
 /* A ray along dir through a uniform point of the disk of the bounding

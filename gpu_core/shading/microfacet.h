@@ -43,8 +43,8 @@ inline float3 Microfacet_sample_vndf(float3 wo, float ax, float ay, float u1, fl
     float lensq = vh.x * vh.x + vh.y * vh.y;
     float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
     float3 t2 = cross(vh, t1);
-    float r = sqrt(u1), phi = 2.0f * PI_F * u2;
-    float a = r * cos(phi), b = r * sin(phi);
+    float2 disk = Sampling_disk(u1, u2);
+    float a = disk.x, b = disk.y;
     float s = 0.5f * (1.0f + vh.z);
     b = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - a * a)) + s * b;
     float3 nh = a * t1 + b * t2 + sqrt(fmax(0.0f, 1.0f - a * a - b * b)) * vh;
