@@ -14,6 +14,9 @@
  * function), so kernels keep calling dot, fmax, length. */
 #ifndef GPUGI_POCL_BUILTINS_H
 #define GPUGI_POCL_BUILTINS_H
+/* only where the compiler has the elementwise builtins (Clang 14 and
+ * later): an older PoCL keeps its library calls */
+#if defined(__has_builtin) && __has_builtin(__builtin_elementwise_max) && __has_builtin(__builtin_elementwise_abs)
 
 #define INLINE_OVL inline __attribute__((overloadable, always_inline))
 
@@ -112,4 +115,5 @@ INLINE_OVL float3 Inline_normalize(float3 v) {
 #undef normalize
 #define normalize Inline_normalize
 
+#endif /* __has_builtin */
 #endif

@@ -81,7 +81,8 @@ def test_inlined_builtins_give_the_builtins_results(device, probe_dir):
     terms = (np.abs(a) * np.abs(b)).sum(axis=1) + np.abs(a).sum(axis=1) + np.abs(b).sum(axis=1)
     tolerance = 2e-6 * np.abs(reference) + 4 * np.finfo(np.float32).eps * terms[:, None, None]
     both_nan = np.isnan(ours) & np.isnan(reference)
-    close = both_nan | (np.abs(ours - reference) <= tolerance) | (ours == reference)
+    with np.errstate(invalid="ignore"):  # infinities of the same sign differ by NaN
+        close = both_nan | (np.abs(ours - reference) <= tolerance) | (ours == reference)
     assert close.all(), np.argwhere(~close)
     # the tiny and huge vectors keep their length and direction
     assert np.all(np.isfinite(ours[4:6, 3, 3])) and np.all(ours[4:6, 3, 3] > 0)
