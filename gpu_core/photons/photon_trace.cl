@@ -14,7 +14,8 @@
  *   all:     a photon is stored at every diffuse hit (the global map of a
  *            scene whose caustic map is not traced).
  * Stored photons go to slots taken from an atomic counter; those past the
- * capacity are counted but not written, so the host can retry larger. Each
+ * capacity are counted but not written, so the host can retry larger (it
+ * sizes the buffers from a first launch over every `step`-th photon). Each
  * also gets a key, photon index x stride + its stores so far, by which the
  * host puts them in an order that does not depend on the scheduling
  * (Photon_reorder): the same scene gives the same photon maps. A photon's
@@ -60,16 +61,17 @@ inline void Photon_store(float3 p, float3 incident, float3 power, int emitter, f
     out_normal[slot] = (float4)(n, 0.0f);
 }
 
-/* One photon path per work item. path_out[i] = (emitted power rgb, surface
- * hits of the path), for the host's statistics. */
+/* One photon path per work item: photon i = step x the work item's index.
+ * path_out[i] = (emitted power rgb, surface hits of the path), for the
+ * host's statistics. */
 __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters, const int n_emitters,
                            const float4 sphere, const int n_photons, const uint seed, const int pass,
                            const int max_bounces, const int max_specular, volatile __global int *counter,
                            const int capacity, __global float4 *out_pos, __global float4 *out_dir,
                            __global float4 *out_power, __global float4 *out_normal, __global uint *out_key,
-                           const uint key_stride, __global float4 *path_out) {
-    int i = get_global_id(0);
-    if (i >= n_photons) return;
+                           const uint key_stride, __global float4 *path_out, const int step) {
+    if (get_global_id(0) >= (n_photons + step - 1) / step) return;
+    int i = get_global_id(0) * step;
     SceneView sc = SCENE_MAKE();
     Rng rng = Rng_make((uint)i, pass == PHOTON_PASS_CAUSTIC ? 1u : 0u, seed); /* one stream per map */
     int emitter = Photon_emitter(emitters, n_emitters, i);

@@ -28,7 +28,9 @@ from ..scene.validate import validate
 from .emit import MAPS, Emitter, allocate, emitter_powers, maps_needed
 
 _PROGRAM = "photons/photon_trace.cl"
-STORE_GUESS = 3  # stored photons per emitted one, first guess of the global buffer
+STORE_GUESS = 3  # stored photons per emitted one where too few are traced to sample it
+SAMPLE_STEP = 32  # every this many photons traced first, to size the global buffer
+SAMPLE_MARGIN = 1.1  # the buffer holds this many times the sampled stores per photon
 MAX_BOUNCES = 8  # scattering events of one photon path
 
 
@@ -68,7 +70,7 @@ def trace_maps(device: Device, buffers: SceneBuffers, emitters: list[Emitter], m
     timer = StageTimer(device.queue)
     light_power = sum((e.power for e in emitters), np.zeros(3))
     stats = {"maps": dict(maps), "light_power": light_power.tolist(), "emitters": len(emitters), "emitted": {},
-             "stored": {}, "dropped": {}, "emitted_power": {}, "mean_path_length": {}, "ms": timer.ms}
+             "stored": {}, "dropped": {}, "passes": {}, "emitted_power": {}, "mean_path_length": {}, "ms": timer.ms}
     built = {name: None for name in MAPS}
     traced = [name for name in MAPS if maps[name].startswith("built")]
     for name in traced:
@@ -76,7 +78,7 @@ def trace_maps(device: Device, buffers: SceneBuffers, emitters: list[Emitter], m
         # with a caustic map, the global map leaves its photons out (photon_trace.cl)
         pass_id = PHOTON_PASS_CAUSTIC if name == "caustic" else PHOTON_PASS_GLOBAL if "caustic" in traced else PHOTON_PASS_ALL
         with timer.stage(f"trace_{name}"):
-            stored, n_stored, asked, path = _trace(device, buffers, rows, pass_id, settings, scene_defines)
+            stored, n_stored, asked, path, passes = _trace(device, buffers, rows, pass_id, settings, scene_defines)
         with timer.stage(f"tree_{name}"):
             position, direction, power, normal = (a[:n_stored] for a in stored)
             built[name] = PointTree.from_device(device, position, (power, direction, normal), k_hint=settings.k_hint)
@@ -84,6 +86,7 @@ def trace_maps(device: Device, buffers: SceneBuffers, emitters: list[Emitter], m
         stats["emitted"][name] = emitted
         stats["stored"][name] = n_stored
         stats["dropped"][name] = asked - n_stored  # past the device's largest buffer
+        stats["passes"][name] = passes  # full traces: more than one where the sampled buffer size fell short
         stats["emitted_power"][name] = path[:3].tolist()
         stats["mean_path_length"][name] = float(path[3]) / emitted if emitted else 0.0
     return PhotonMaps(global_map=built["global"], caustic_map=built["caustic"], center=buffers.center, stats=stats)
@@ -92,14 +95,14 @@ def trace_maps(device: Device, buffers: SceneBuffers, emitters: list[Emitter], m
 def _trace(device: Device, buf: SceneBuffers, rows: np.ndarray, pass_id: int, settings: PhotonSettings,
            scene_defines: dict | None):
     """One pass: the stored photons (position with its slot in w, incident
-    direction, power, normal: device arrays in the kernel's order), how
-    many were stored and how many asked to be, and the sums over the
-    emitted photons of their power (rgb) and surface hits. A pass that stores more
-    than the buffers hold runs again with room for all (same paths), up to
-    the device's largest buffer."""
+    direction, power, normal: device arrays in the key order), how many
+    were stored and how many asked to be, the sums over the emitted photons
+    of their power (rgb) and surface hits, and how many full traces ran.
+    The buffers are sized by _first_capacity; a trace that stores more than
+    they hold runs again with room for all (same paths), up to the device's
+    largest buffer."""
     kernel = device.kernel(_PROGRAM, "Photon_trace", scene_defines)
     n = int(rows["count"].sum())
-    capacity = max(n * (1 if pass_id == PHOTON_PASS_CAUSTIC else STORE_GUESS), 1)
     path = device.array(max(n, 1) * 4, np.float32).reshape(max(n, 1), 4)
     counter = device.empty(4)
     emitter_buf = device.to_device(rows)
@@ -109,20 +112,46 @@ def _trace(device: Device, buf: SceneBuffers, rows: np.ndarray, pass_id: int, se
     if n * stride >= 1 << 32:
         raise GpuGiError(f"{n} photons of up to {stride} hits each are more than one map can order; "
                          "lower the photon count")
-    while True:
-        capacity = min(capacity, largest)
+
+    def launch(step: int, capacity: int) -> tuple[list, object, int]:
+        """Every step-th photon traced into buffers of ``capacity``; the
+        buffers, the keys and how many stores were asked for."""
         stored = [device.array(capacity * 4, np.float32).reshape(capacity, 4) for _ in range(4)]
         keys = device.empty(4 * capacity)
         device.fill(counter, 0, 4)
-        kernel(n, *buf.kernel_args(), emitter_buf, np.int32(len(rows)), sphere, np.int32(n), np.uint32(settings.seed),
-               np.int32(pass_id), np.int32(settings.max_bounces), np.int32(settings.max_specular), counter,
-               np.int32(capacity), *(a.data for a in stored), keys, np.uint32(stride), path.data)
-        wanted = int(device.scalar(counter))
+        kernel(-(-n // step), *buf.kernel_args(), emitter_buf, np.int32(len(rows)), sphere, np.int32(n),
+               np.uint32(settings.seed), np.int32(pass_id), np.int32(settings.max_bounces),
+               np.int32(settings.max_specular), counter, np.int32(capacity), *(a.data for a in stored), keys,
+               np.uint32(stride), path.data, np.int32(step))
+        return stored, keys, int(device.scalar(counter))
+
+    capacity = _first_capacity(n, pass_id, stride, lambda step, room: launch(step, room)[2])
+    passes = 0
+    while True:
+        capacity = max(min(capacity, largest), 1)
+        stored, keys, wanted = launch(1, capacity)
+        passes += 1
         if wanted <= capacity or capacity >= largest:
             count = min(wanted, capacity)
             ordered = _in_key_order(device, stored, keys, count, n * stride, scene_defines)
-            return ordered, count, wanted, _path_sums(device, path, n)
+            return ordered, count, wanted, _path_sums(device, path, n), passes
         capacity = wanted
+
+
+def _first_capacity(n: int, pass_id: int, stride: int, sample) -> int:
+    """Room for the stores of n photons: one each in the caustic pass (it
+    stops at its first store); elsewhere the stores per photon of every
+    SAMPLE_STEP-th photon, traced first by ``sample(step, room)`` (-> stores
+    asked), with a margin, so that a closed, bright scene (three or more
+    stores per photon) is not traced twice; STORE_GUESS each for a pass too
+    small to sample."""
+    if pass_id == PHOTON_PASS_CAUSTIC:
+        return n
+    sampled = -(-n // SAMPLE_STEP)
+    if sampled < 64:
+        return n * STORE_GUESS
+    per_photon = sample(SAMPLE_STEP, sampled * stride) / sampled
+    return int(np.ceil(n * per_photon * SAMPLE_MARGIN)) + 64
 
 
 def _in_key_order(device: Device, stored: list, keys, count: int, key_bound: int, scene_defines) -> list:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scenes_py import camera_looking_down, make_scene, plane_scene, quad
 
+from gpu_core.photons import trace as photon_trace
 from gpu_core.photons import trace_photon_maps
 from gpu_core.renderer import Renderer
 from gpu_core.settings import RenderSettings
@@ -86,6 +87,21 @@ def test_closed_box_stores_power_over_one_minus_albedo(device, albedo):
     np.testing.assert_allclose(stored, 10 / (1 - albedo), rtol=0.03)
     assert maps.stats["mean_path_length"]["global"] == pytest.approx(1 / (1 - albedo), rel=0.03)
     assert maps.stats["stored"]["global"] == maps.global_map.point_count
+
+
+def test_a_bright_closed_box_is_traced_once_into_buffers_sized_by_a_sample(device, monkeypatch):
+    # albedo 0.8: five stores per photon, more than the fixed guess of three would hold
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0.1, -0.2, 0.3), power=(10, 10, 10))])
+    scene = closed_box(0.8, lights)
+    sized = trace_photon_maps(device, scene, global_photons=20000, seed=3, max_bounces=60)
+    assert sized.stats["stored"]["global"] > photon_trace.STORE_GUESS * 20000
+    assert sized.stats["passes"]["global"] == 1
+    # a sample that falls short: traced again with room for all, the same map
+    monkeypatch.setattr(photon_trace, "SAMPLE_MARGIN", 0.5)
+    short = trace_photon_maps(device, scene, global_photons=20000, seed=3, max_bounces=60)
+    assert short.stats["passes"]["global"] == 2
+    np.testing.assert_array_equal(short.global_map.positions(), sized.global_map.positions())
+    np.testing.assert_array_equal(short.global_map.photons()["power"], sized.global_map.photons()["power"])
 
 
 def test_bounce_limit_ends_paths(device):
