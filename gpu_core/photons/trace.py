@@ -28,7 +28,7 @@ from ..scene.validate import validate
 from .emit import MAPS, Emitter, allocate, emitter_powers, maps_needed
 
 _PROGRAM = "photons/photon_trace.cl"
-STORE_GUESS = 3  # stored photons per emitted one where too few are traced to sample it
+STORE_GUESS = 3  # stored photons per emitted one: the memory plan's estimate, and the buffer of a pass too small to sample
 SAMPLE_STEP = 32  # every this many photons traced first, to size the global buffer
 SAMPLE_MARGIN = 1.1  # the buffer holds this many times the sampled stores per photon
 MAX_BOUNCES = 8  # scattering events of one photon path
