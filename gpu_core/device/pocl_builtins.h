@@ -20,21 +20,20 @@
 
 #define INLINE_OVL inline __attribute__((overloadable, always_inline))
 
-/* fmin, fmax, fabs, sqrt: the compiler's own builtins */
-INLINE_OVL float Inline_fmin(float a, float b) { return __builtin_fminf(a, b); }
-INLINE_OVL float2 Inline_fmin(float2 a, float2 b) { return __builtin_elementwise_min(a, b); }
-INLINE_OVL float3 Inline_fmin(float3 a, float3 b) { return __builtin_elementwise_min(a, b); }
-INLINE_OVL float4 Inline_fmin(float4 a, float4 b) { return __builtin_elementwise_min(a, b); }
-INLINE_OVL float2 Inline_fmin(float2 a, float b) { return __builtin_elementwise_min(a, (float2)(b)); }
-INLINE_OVL float3 Inline_fmin(float3 a, float b) { return __builtin_elementwise_min(a, (float3)(b)); }
-INLINE_OVL float4 Inline_fmin(float4 a, float b) { return __builtin_elementwise_min(a, (float4)(b)); }
-INLINE_OVL float Inline_fmax(float a, float b) { return __builtin_fmaxf(a, b); }
-INLINE_OVL float2 Inline_fmax(float2 a, float2 b) { return __builtin_elementwise_max(a, b); }
-INLINE_OVL float3 Inline_fmax(float3 a, float3 b) { return __builtin_elementwise_max(a, b); }
-INLINE_OVL float4 Inline_fmax(float4 a, float4 b) { return __builtin_elementwise_max(a, b); }
-INLINE_OVL float2 Inline_fmax(float2 a, float b) { return __builtin_elementwise_max(a, (float2)(b)); }
-INLINE_OVL float3 Inline_fmax(float3 a, float b) { return __builtin_elementwise_max(a, (float3)(b)); }
-INLINE_OVL float4 Inline_fmax(float4 a, float b) { return __builtin_elementwise_max(a, (float4)(b)); }
+/* fmin and fmax for a float, a vector, and a vector against a float: the
+ * compiler's own builtins */
+#define INLINE_MIN_MAX(name, scalar, elementwise)                                                  \
+    INLINE_OVL float name(float a, float b) { return scalar(a, b); }                               \
+    INLINE_OVL float2 name(float2 a, float2 b) { return elementwise(a, b); }                       \
+    INLINE_OVL float3 name(float3 a, float3 b) { return elementwise(a, b); }                       \
+    INLINE_OVL float4 name(float4 a, float4 b) { return elementwise(a, b); }                       \
+    INLINE_OVL float2 name(float2 a, float b) { return elementwise(a, (float2)(b)); }              \
+    INLINE_OVL float3 name(float3 a, float b) { return elementwise(a, (float3)(b)); }              \
+    INLINE_OVL float4 name(float4 a, float b) { return elementwise(a, (float4)(b)); }
+INLINE_MIN_MAX(Inline_fmin, __builtin_fminf, __builtin_elementwise_min)
+INLINE_MIN_MAX(Inline_fmax, __builtin_fmaxf, __builtin_elementwise_max)
+
+/* fabs and sqrt: the compiler's own builtins */
 INLINE_OVL float Inline_fabs(float a) { return __builtin_fabsf(a); }
 INLINE_OVL float2 Inline_fabs(float2 a) { return __builtin_elementwise_abs(a); }
 INLINE_OVL float3 Inline_fabs(float3 a) { return __builtin_elementwise_abs(a); }
