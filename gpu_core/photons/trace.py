@@ -31,6 +31,7 @@ _PROGRAM = "photons/photon_trace.cl"
 STORE_GUESS = 3  # stored photons per emitted one: the memory plan's estimate, and the buffer of a pass too small to sample
 SAMPLE_STEP = 32  # every this many photons traced first, to size the global buffer
 SAMPLE_MARGIN = 1.1  # the buffer holds this many times the sampled stores per photon
+SAMPLE_MIN = 64  # fewest sampled photons that size the buffer
 MAX_BOUNCES = 8  # scattering events of one photon path
 
 
@@ -148,10 +149,10 @@ def _first_capacity(n: int, pass_id: int, stride: int, sample) -> int:
     if pass_id == PHOTON_PASS_CAUSTIC:
         return n
     sampled = -(-n // SAMPLE_STEP)
-    if sampled < 64:
+    if sampled < SAMPLE_MIN:
         return n * STORE_GUESS
-    per_photon = sample(SAMPLE_STEP, sampled * stride) / sampled
-    return int(np.ceil(n * per_photon * SAMPLE_MARGIN)) + 64
+    per_photon = sample(SAMPLE_STEP, sampled * stride) / sampled  # room for every store: none is dropped
+    return int(np.ceil(n * per_photon * SAMPLE_MARGIN)) + SAMPLE_MIN  # a few more where the sample saw few
 
 
 def _in_key_order(device: Device, stored: list, keys, count: int, key_bound: int, scene_defines) -> list:
