@@ -126,7 +126,7 @@ def _trace(device: Device, buf: SceneBuffers, rows: np.ndarray, pass_id: int, se
                np.uint32(stride), path.data, np.int32(step))
         return stored, keys, int(device.scalar(counter))
 
-    capacity = _first_capacity(n, pass_id, stride, lambda step, room: launch(step, room)[2])
+    capacity = _first_capacity(n, pass_id, stride, lambda step, room: launch(step, min(room, largest))[2])
     passes = 0
     while True:
         capacity = max(min(capacity, largest), 1)
@@ -151,7 +151,7 @@ def _first_capacity(n: int, pass_id: int, stride: int, sample) -> int:
     sampled = -(-n // SAMPLE_STEP)
     if sampled < SAMPLE_MIN:
         return n * STORE_GUESS
-    per_photon = sample(SAMPLE_STEP, sampled * stride) / sampled  # room for every store: none is dropped
+    per_photon = sample(SAMPLE_STEP, sampled * stride) / sampled  # stores past the room are counted too
     return int(np.ceil(n * per_photon * SAMPLE_MARGIN)) + SAMPLE_MIN  # a few more where the sample saw few
 
 
