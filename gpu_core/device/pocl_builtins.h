@@ -49,6 +49,10 @@ INLINE_OVL int Inline_isnan(float x) { return __builtin_isnan(x); }
 INLINE_OVL int Inline_isinf(float x) { return __builtin_isinf(x); }
 INLINE_OVL int Inline_isfinite(float x) { return __builtin_isfinite(x); }
 
+/* popcount of a uint and a ulong */
+INLINE_OVL uint Inline_popcount(uint x) { return (uint)__builtin_popcount(x); }
+INLINE_OVL ulong Inline_popcount(ulong x) { return (ulong)__builtin_popcountl(x); }
+
 /* clamp(x, lo, hi) = fmin(fmax(x, lo), hi), and mix(x, y, a) = x + (y - x) a, as the specification defines them */
 INLINE_OVL float Inline_clamp(float x, float lo, float hi) { return Inline_fmin(Inline_fmax(x, lo), hi); }
 INLINE_OVL float2 Inline_clamp(float2 x, float lo, float hi) { return Inline_fmin(Inline_fmax(x, lo), hi); }
@@ -87,6 +91,8 @@ INLINE_OVL float3 Inline_normalize(float3 v) {
     return INLINE_SQUARES_SAFE(s) ? v / __builtin_sqrtf(s) : normalize(v);
 }
 
+#undef popcount
+#define popcount Inline_popcount
 #undef isnan
 #define isnan Inline_isnan
 #undef isinf

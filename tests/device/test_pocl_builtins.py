@@ -28,12 +28,14 @@ __kernel void Builtins_probe(const __global float4 *a, const __global float4 *b,
     o[8] = (float4)(clamp(u, y.y, y.z), mix(x.y, y.y, 0.25f));
     o[9] = (float4)(mix(u, v, y.w), (float)(isnan(x.x) + 2 * isinf(x.x) + 4 * isfinite(x.x)));
     o[10] = fmin(x, y) + fmax(x, 1.0f) * 0.0f;
+    ulong bits = ((ulong)as_uint(x.x) << 32) | as_uint(y.y);
+    o[11] = (float4)((float)popcount(as_uint(x.x)), (float)popcount(bits), 0.0f, 0.0f);
 }
 """
-OUTPUTS = 11
+OUTPUTS = 12
 # outputs computed exactly alike (selections, exact operations); the rest may round differently
 _EXACT = [(0, slice(0, 4)), (1, slice(0, 3)), (2, slice(0, 3)), (3, slice(0, 3)), (4, slice(0, 4)), (5, slice(0, 3)),
-          (7, slice(3, 4)), (8, slice(0, 3)), (9, slice(3, 4)), (10, slice(0, 4))]
+          (7, slice(3, 4)), (8, slice(0, 3)), (9, slice(3, 4)), (10, slice(0, 4)), (11, slice(0, 2))]
 
 
 def _rows():
