@@ -124,13 +124,14 @@ def bounds(device: Device, points: cl.Buffer, n: int) -> tuple[np.ndarray, np.nd
     return _reduce(device, "min_float4", points, n, f4), _reduce(device, "max_float4", points, n, f4)
 
 
-def same_ints(device: Device, a: cl.Buffer, b: cl.Buffer, n: int) -> bool:
-    """Whether the first ``n`` ints of ``a`` and ``b`` are equal, bit for
-    bit (floats compared as their bits: NaNs alike, 0 and -0 not)."""
-    if n <= 0:
-        return True
+def same_ints(device: Device, pairs: list[tuple[cl.Buffer, cl.Buffer, int]]) -> bool:
+    """Whether, for every ``(a, b, n)`` of ``pairs``, the first ``n`` ints
+    of ``a`` and ``b`` are equal, bit for bit (floats compared as their
+    bits: NaNs alike, 0 and -0 not); one flag and one read for them all."""
     flag = device.zeros(4)
-    _k(device, "Prim_flag_difference")(_chunks(n), a, b, np.int32(n), flag, np.int32(_chunks(n)))
+    for a, b, n in pairs:
+        if n > 0:
+            _k(device, "Prim_flag_difference")(_chunks(n), a, b, np.int32(n), flag, np.int32(_chunks(n)))
     return not int(device.scalar(flag))
 
 

@@ -59,16 +59,27 @@ def test_device_arrays_are_one_dimensional_views_of_their_buffers(device):
 def test_same_ints_finds_one_differing_bit_anywhere(device, n, at):
     a = np.random.default_rng(n).integers(-2**31, 2**31, n, dtype=np.int64).astype(np.int32)
     b = a.copy()
-    assert primitives.same_ints(device, device.to_device(a), device.to_device(b), n)
+    assert primitives.same_ints(device, [(device.to_device(a), device.to_device(b), n)])
     b[at] ^= 1 << 17
-    assert not primitives.same_ints(device, device.to_device(a), device.to_device(b), n)
+    assert not primitives.same_ints(device, [(device.to_device(a), device.to_device(b), n)])
     # only the first n count
-    assert primitives.same_ints(device, device.to_device(a), device.to_device(b), at)
+    assert primitives.same_ints(device, [(device.to_device(a), device.to_device(b), at)])
+
+
+def test_same_ints_of_several_pairs_finds_a_difference_in_any(device):
+    a = np.arange(300, dtype=np.int32)
+    same = (device.to_device(a), device.to_device(a.copy()), 300)
+    b = a.copy()
+    b[7] += 1
+    differs = (device.to_device(a), device.to_device(b), 300)
+    assert primitives.same_ints(device, [same, same])
+    assert not primitives.same_ints(device, [same, differs])
+    assert not primitives.same_ints(device, [differs, same])
 
 
 def test_same_ints_compares_float_bits_not_values(device):
     a = np.array([np.nan, 0.0, 1.0], np.float32)
-    assert primitives.same_ints(device, device.to_device(a), device.to_device(a.copy()), 3)  # NaN is itself
-    assert not primitives.same_ints(device, device.to_device(a), device.to_device(np.array([np.nan, -0.0, 1.0],
-                                                                                       np.float32)), 3)
-    assert primitives.same_ints(device, device.empty(4), device.empty(4), 0)
+    assert primitives.same_ints(device, [(device.to_device(a), device.to_device(a.copy()), 3)])  # NaN is itself
+    assert not primitives.same_ints(device, [(device.to_device(a), device.to_device(np.array([np.nan, -0.0, 1.0],
+                                                                                        np.float32)), 3)])
+    assert primitives.same_ints(device, [(device.empty(4), device.empty(4), 0)])

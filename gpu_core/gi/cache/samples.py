@@ -167,8 +167,8 @@ class HeldSamples:
             held_key, held_n, (held_pos, held_nrm, held_pixels), chosen = entry
             if held_key != key:
                 continue
-            if held_n == n and all(primitives.same_ints(device, a, b, ints) for a, b, ints in
-                                   ((pos, held_pos, 4 * n), (nrm, held_nrm, 4 * n), (pixels, held_pixels, 2 * n))):
+            if held_n == n and primitives.same_ints(
+                    device, [(pos, held_pos, 4 * n), (nrm, held_nrm, 4 * n), (pixels, held_pixels, 2 * n)]):
                 self._held.remove(entry)
                 self._held.append(entry)
                 return chosen, True
