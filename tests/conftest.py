@@ -15,9 +15,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 @pytest.fixture(scope="session")
 def device():
+    """The tests' OpenCL device: the CPU (PoCL), or GPUGI_TEST_DEVICE's spec
+    (e.g. NVIDIA) to run the kernel tests on another driver."""
     from gpu_core.device import get_device
 
-    return get_device("cpu")
+    return get_device(os.environ.get("GPUGI_TEST_DEVICE", "cpu"))
 
 
 @pytest.fixture(scope="session")

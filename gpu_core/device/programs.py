@@ -54,6 +54,13 @@ _SEPARATE_MARK = "-DGPUGI_COMPILED_OBJECT=1"
 # there every program starts with the header that inlines them
 _INLINE_BUILTINS_PLATFORMS = ("Portable Computing Language",)
 _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
+# Division and square root correctly rounded wherever the device offers it
+# (OpenCL C allows 2.5 and 3 ulp otherwise, and NVIDIA's driver takes that):
+# kernels then compute alike on PoCL and a GPU. Without it, on NVIDIA's
+# driver the kd-tree's ray shear (dir / dz, times corners 1e5 units away)
+# moved hit distances past the tests' 1e-4; it costs the image kernel there
+# 13-20% (README, "On a GPU").
+_EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 
 
 def kernel_cache_dir() -> Path:
@@ -119,6 +126,7 @@ class Programs:
         self.device = device
         self._separate = device.platform.name.strip() in _SEPARATE_PLATFORMS
         self._inline_builtins = device.platform.name.strip() in _INLINE_BUILTINS_PLATFORMS
+        self._exact_division = bool(device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
         self._simulator = any(name in device.platform.name.lower() for name in _SIMULATOR_PLATFORMS)
         self.builds: list[BuildRecord] = []
         self._programs: dict[tuple, cl.Program] = {}
@@ -175,6 +183,8 @@ class Programs:
         source = load_source(name)
         if self._inline_builtins:
             source = f'#line 1 "device/{_INLINE_BUILTINS.name}"\n{_INLINE_BUILTINS.read_text()}\n{source}'
+        if self._exact_division:
+            options = options + (_EXACT_DIVISION,)
         if self._separate:
             options = options + (_SEPARATE_MARK,)
         dev = self.device

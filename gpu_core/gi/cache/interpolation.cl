@@ -103,7 +103,8 @@ inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float 
             if (dist >= spos[j].w || cosn <= CACHE_MIN_COS || dot(d, nx + nj) < -behind * rj) continue;
             float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
             *wsum += w;
-            mean += (w / *wsum) * (sirr[j].xyz - mean);
+            /* the first sample is taken as it is (w / w need not round to 1) */
+            mean = *wsum == w ? sirr[j].xyz : mean + (w / *wsum) * (sirr[j].xyz - mean);
         }
     }
     return mean;
