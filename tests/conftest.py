@@ -22,6 +22,22 @@ def device():
     return get_device(os.environ.get("GPUGI_TEST_DEVICE", "cpu"))
 
 
+@pytest.fixture
+def probe_program(tmp_path, monkeypatch):
+    """write(name, source): a kernel source the device's programs build from
+    a private folder, with a private kernel cache; returns ``name``."""
+    import gpu_core.device.programs as programs_module
+
+    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", tmp_path)
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+
+    def write(name: str, source: str) -> str:
+        (tmp_path / name).write_text(source)
+        return name
+
+    return write
+
+
 @pytest.fixture(scope="session")
 def bpy_module():
     import bpy

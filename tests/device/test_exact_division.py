@@ -6,7 +6,6 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-import gpu_core.device.programs as programs_module
 
 _KERNEL = """
 __kernel void Division_probe(const __global float *a, const __global float *b, __global float4 *out) {
@@ -20,20 +19,14 @@ def _offers_exact_division(device) -> bool:
     return bool(device.device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
 
 
-@pytest.fixture
-def probe_dir(tmp_path, monkeypatch):
-    (tmp_path / "division_probe.cl").write_text(_KERNEL)
-    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", tmp_path)
-    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
-    return tmp_path
-
-
-def test_programs_ask_for_exact_division_where_the_device_offers_it(device, probe_dir):
+def test_programs_ask_for_exact_division_where_the_device_offers_it(device, probe_program):
+    probe_program("division_probe.cl", _KERNEL)
     options = device.programs._cache_entry("division_probe.cl", ())[1]
     assert ("-cl-fp32-correctly-rounded-divide-sqrt" in options) == _offers_exact_division(device)
 
 
-def test_division_and_square_root_round_as_numpy_does(device, probe_dir):
+def test_division_and_square_root_round_as_numpy_does(device, probe_program):
+    probe_program("division_probe.cl", _KERNEL)
     if not _offers_exact_division(device):
         pytest.skip("the device does not offer correctly rounded division")
     rng = np.random.default_rng(5)

@@ -7,7 +7,6 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-import gpu_core.device.programs as programs_module
 
 _KERNEL = """
 /* every row of `a`, `b` (float4) through the builtins the header replaces;
@@ -64,15 +63,8 @@ def _run(device, program, a, b):
     return out
 
 
-@pytest.fixture
-def probe_dir(tmp_path, monkeypatch):
-    (tmp_path / "builtins_probe.cl").write_text(_KERNEL)
-    monkeypatch.setattr(programs_module, "INCLUDE_ROOT", tmp_path)
-    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
-    return tmp_path
-
-
-def test_inlined_builtins_give_the_builtins_results(device, probe_dir):
+def test_inlined_builtins_give_the_builtins_results(device, probe_program):
+    probe_program("builtins_probe.cl", _KERNEL)
     a, b = _rows()
     ours = _run(device, device.program("builtins_probe.cl", {"OUTPUTS": OUTPUTS}), a, b)
     plain = cl.Program(device.context, _KERNEL).build(options=["-cl-std=CL1.2", f"-DOUTPUTS={OUTPUTS}"])
@@ -91,7 +83,8 @@ def test_inlined_builtins_give_the_builtins_results(device, probe_dir):
     np.testing.assert_allclose(np.linalg.norm(ours[4:7, 7, :3], axis=1), 1.0, rtol=1e-6)
 
 
-def test_the_header_goes_before_programs_on_pocl_only(device, probe_dir):
+def test_the_header_goes_before_programs_on_pocl_only(device, probe_program):
+    probe_program("builtins_probe.cl", _KERNEL)
     source = device.programs._cache_entry("builtins_probe.cl", ())[0]
     on_pocl = "portable computing language" in device.context.devices[0].platform.name.lower()
     assert ("#define dot Inline_dot" in source) == on_pocl
