@@ -247,13 +247,15 @@ class PointTree:
         return self.irradiance(positions, normals, k, albedo=albedo, **options)
 
     def irradiance_on_device(self, positions: cl.Buffer, normals: cl.Buffer, n: int, k: int, out: cl.Buffer,
-                             filter: str = "epanechnikov", normal_cos: float = 0.5) -> None:
+                             filter: str = "epanechnikov", normal_cos: float = 0.5,
+                             max_radius: float | None = None) -> None:
         """Irradiance (float4 rows into ``out``) at ``n`` surface points
         whose float4 positions and unit normals are on the device, in their
-        own order (points from a camera grid are coherent already)."""
+        own order (points from a camera grid are coherent already), from the
+        ``k`` nearest photons within ``max_radius``."""
         k = self._check_k(k)
         self._kernel("PointTree_density_batch", k)(
-            n, *self.kernel_args(), *self.photon_args(), positions, normals, None, None, np.float32(np.inf),
+            n, *self.kernel_args(), *self.photon_args(), positions, normals, None, None, self._max_d2(max_radius),
             np.int32(FILTERS[filter]), np.float32(normal_cos), np.int32(0), np.int32(n), out)
 
 

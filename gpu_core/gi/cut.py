@@ -41,6 +41,12 @@ MAX_ROUNDS = 6  # default refinement rounds
 LEVELS = (12, 13)  # tree levels whose mean E~_p is E_min
 NEIGHBOURS = 16  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS)
 COHERENT = 0.9  # |mean photon normal| below this: the node spans several surfaces (cut.cl CUT_COHERENT)
+# Caustic estimates gather within this many times the caustic map's typical
+# k-photon radius (its VVH radius), Jensen's maximum radius: further out the
+# few photons found count over that disc. Without it, a point far from every
+# caustic searched the map until it had k photons (the caustics scene's
+# estimates 109 -> 8 ms at 256², the image within 0.9% RMS, no farther from Cycles).
+CAUSTIC_REACH = 16.0
 _PROGRAM = "gi/cut.cl"
 
 
@@ -122,9 +128,18 @@ def with_caustics(cut: Cut, caustic_map: PointTree | None, k: int) -> Cut:
         return cut
     device, n = cut.device, cut.count
     caustic, total = device.empty(16 * n), device.empty(16 * n)
-    caustic_map.irradiance_on_device(cut.centre, cut.normal, n, k, caustic)
+    caustic_irradiance(caustic_map, cut.centre, cut.normal, n, k, caustic)
     device.kernel(_PROGRAM, "Cut_add_irradiance", lookup_defines(cut.k))(n, cut.irradiance, caustic, np.int32(n), total)
     return replace(cut, irradiance=total, stats={**cut.stats, "caustics_in_nodes": True})
+
+
+def caustic_irradiance(caustic_map: PointTree, positions: cl.Buffer, normals: cl.Buffer, n: int, k: int,
+                       out: cl.Buffer) -> None:
+    """The caustic map's ``k``-photon irradiance at ``n`` device points,
+    gathered within CAUSTIC_REACH times the map's typical radius."""
+    radius = caustic_map.radius
+    reach = CAUSTIC_REACH * radius if np.isfinite(radius) and radius > 0 else None
+    caustic_map.irradiance_on_device(positions, normals, n, k, out, max_radius=reach)
 
 
 def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_rounds: int = MAX_ROUNDS) -> Cut:

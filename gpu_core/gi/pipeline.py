@@ -106,7 +106,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
         say("caustics")
         with timer.stage("caustics"):
             estimate = device.empty(16 * n)
-            maps.caustic_map.irradiance_on_device(points.pos, points.nrm, n, settings.photon_k, estimate)
+            cut.caustic_irradiance(maps.caustic_map, points.pos, points.nrm, n, settings.photon_k, estimate)
             caustic = points.scatter(estimate)
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
     # glossy paths read the diffuse light where they land from the cut

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from gpu_core.accel.point_tree import PointTree
+from gpu_core.device.layout import float4_rows
 from gpu_core.gi import cut
 
 UP = np.array([0.0, 0.0, 1.0], np.float32)
@@ -140,3 +141,30 @@ def test_tiny_and_huge_scenes_give_irradiance_over_scale_squared(device, scale):
     e0 = base.irradiance_at(q, np.tile(UP, (200, 1)))
     e1 = scaled.irradiance_at(q * np.float32(scale), np.tile(UP, (200, 1)))
     np.testing.assert_allclose(e1 * scale**2, e0, rtol=1e-2)
+
+
+def _caustic_estimates(device, tree, q, k):
+    """(bounded, unbounded): cut.caustic_irradiance at host points ``q`` on
+    the plane facing up, and the same estimate without a reach."""
+    n = len(q)
+    pos, nrm = device.to_device(float4_rows(q)), device.to_device(float4_rows(np.tile(UP, (n, 1))))
+    bounded, unbounded = device.empty(16 * n), device.empty(16 * n)
+    cut.caustic_irradiance(tree, pos, nrm, n, k, bounded)
+    tree.irradiance_on_device(pos, nrm, n, k, unbounded)
+    return device.read_xyz(bounded, n), device.read_xyz(unbounded, n)
+
+
+def test_caustic_estimates_gather_only_within_the_reach_of_the_maps_radius(device):
+    rng = np.random.default_rng(7)
+    # a bright caustic on a small square, seen from inside it and from far away
+    tree = build(device, *plane_photons(rng, 20000, 50.0, half=0.05))
+    inside = np.zeros((200, 3), np.float32)
+    inside[:, :2] = rng.uniform(-0.04, 0.04, (200, 2))
+    bounded, unbounded = _caustic_estimates(device, tree, inside, 32)
+    np.testing.assert_array_equal(bounded, unbounded)  # k photons lie well within the reach
+    assert abs(bounded.mean() / 50.0 - 1.0) < 0.05
+    reach = cut.CAUSTIC_REACH * tree.radius
+    far = np.array([[0.05 + 2 * reach, 0.0, 0.0], [0.0, -0.05 - 1.5 * reach, 0.0]], np.float32)
+    bounded, unbounded = _caustic_estimates(device, tree, far, 32)
+    assert (unbounded[:, 0] > 0).all()  # the unbounded search reaches the caustic and smears it out
+    assert (bounded == 0).all()
