@@ -16,11 +16,12 @@ add-on's settings of each preset in GI mode, pickled into
 Renderer on ``--device`` (a fresh renderer per render, as F12 has): one
 warm-up, then the median of ``--repeats`` of the render call's wall time and
 of each stage's milliseconds (the render's stats; the export is not in
-them). Also, per scene at its first size: the first frame of a fresh process
-with every kernel cache empty (ours, PoCL's and NVIDIA's), Preview; and the
-image kernel's camera paths per second in Reference mode at 16 samples,
-direct light only and with deep bounces (12 and 12), on the kernel's own
-time (the first frame only for ``--cold-scenes``). Writes bench/results/frame_snapshot[_TAG].json and .txt.
+them). Also, per scene at its first size: the image kernel's camera paths
+per second in Reference mode at 16 samples, direct light only and with deep
+bounces (12 and 12), on the kernel's own time; and for ``--cold-scenes``
+the first Preview frame of a fresh process with every kernel cache empty
+(ours, PoCL's and NVIDIA's). ``--no-denoise`` renders without the denoiser.
+Writes bench/results/frame_snapshot[_TAG].json and .txt.
 """
 
 from __future__ import annotations
@@ -107,13 +108,13 @@ def paths_per_second(device, scene, settings, direct_only: bool, repeats: int) -
     return scene.camera.width * scene.camera.height * 16 / 1e6 / kernel
 
 
-def cold(path: str, size: int, device_spec: str | None) -> dict:
+def cold(path: str, size: int, device_spec: str | None, no_denoise: bool) -> dict:
     """A fresh process's first Preview frame with every kernel cache empty."""
     with tempfile.TemporaryDirectory() as caches:
         env = dict(os.environ, POCL_CACHE_DIR=os.path.join(caches, "pocl"), CUDA_CACHE_DISABLE="1",
                    GPUGI_KERNEL_CACHE=os.path.join(caches, "kernels"))
         began = time.perf_counter()
-        spec = [] if device_spec is None else ["--device", device_spec]
+        spec = ([] if device_spec is None else ["--device", device_spec]) + (["--no-denoise"] if no_denoise else [])
         run = subprocess.run([sys.executable, os.path.abspath(__file__), "first-frame", path, str(size), *spec],
                              env=env, capture_output=True, text=True, timeout=1800)
         seconds = time.perf_counter() - began
@@ -122,12 +123,15 @@ def cold(path: str, size: int, device_spec: str | None) -> dict:
     return dict(process_seconds=seconds, **json.loads(run.stdout.strip().splitlines()[-1]))
 
 
-def first_frame(path: str, size: int, device_spec: str | None) -> None:
+def first_frame(path: str, size: int, device_spec: str | None, no_denoise: bool) -> None:
     """(In the fresh process) one Preview render; prints its time and stages."""
     from gpu_core.device import get_device
 
     snapshot = load(path)
-    seconds, ms = render_once(get_device(device_spec), snapshot["exports"][size], snapshot["settings"]["preview"])
+    settings = snapshot["settings"]["preview"]
+    if no_denoise:
+        settings = replace(settings, denoise=False)
+    seconds, ms = render_once(get_device(device_spec), snapshot["exports"][size], settings)
     print(json.dumps(dict(seconds=seconds, ms=ms)))
 
 
@@ -161,7 +165,7 @@ def run(device_spec: str | None, repeats: int, tag: str, presets: list[str], sce
         for index, (size, scene) in enumerate(sorted(snapshot["exports"].items())):
             if index == 0:
                 if name in cold_scenes:
-                    first = cold(path, size, device_spec)
+                    first = cold(path, size, device_spec, no_denoise)
                     firsts.append(dict(scene=name, size=size, **first))
                     say(f"{name} {size} first frame, empty caches: process {first['process_seconds']:.1f} s, "
                         f"render {first['seconds']:.2f} s ({stage_line(first['ms'])})")
@@ -191,7 +195,8 @@ def main() -> None:
     saving.add_argument("--scenes", nargs="+", default=scenes, choices=scenes)
     saving.add_argument("--sizes", nargs="+", type=int, default=[256, 512])
     running = verbs.add_parser("run", help="render the snapshots on an OpenCL device")
-    running.add_argument("--device", default=None, help="OpenCL device spec (default: GPUGI_DEVICE or the automatic choice)")
+    running.add_argument("--device", default=None,
+                         help="OpenCL device spec (default: GPUGI_DEVICE or the automatic choice)")
     running.add_argument("--scenes", nargs="+", help="only these scenes (default: every snapshot)")
     running.add_argument("--cold-scenes", nargs="*", default=["cornell_box"],
                          help="scenes whose first frame with empty caches is timed (default: the Cornell box)")
@@ -204,13 +209,14 @@ def main() -> None:
     first.add_argument("path")
     first.add_argument("size", type=int)
     first.add_argument("--device", default=None)
+    first.add_argument("--no-denoise", action="store_true")
     args = parser.parse_args()
     if args.verb == "save":
         save(args.scenes, args.sizes)
     elif args.verb == "run":
         run(args.device, args.repeats, args.tag, args.presets, args.scenes, args.cold_scenes, args.no_denoise)
     else:
-        first_frame(args.path, args.size, args.device)
+        first_frame(args.path, args.size, args.device, args.no_denoise)
 
 
 if __name__ == "__main__":
