@@ -7,6 +7,8 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
+from gpu_core.device.programs import build_options
+
 
 _KERNEL = """
 /* every row of `a`, `b` (float4) through the builtins the header replaces;
@@ -67,7 +69,9 @@ def test_inlined_builtins_give_the_builtins_results(device, probe_program):
     probe_program("builtins_probe.cl", _KERNEL)
     a, b = _rows()
     ours = _run(device, device.program("builtins_probe.cl", {"OUTPUTS": OUTPUTS}), a, b)
-    plain = cl.Program(device.context, _KERNEL).build(options=["-cl-std=CL1.2", f"-DOUTPUTS={OUTPUTS}"])
+    # the driver's own builtins, built with the options the program memo uses
+    options = device.programs._cache_entry("builtins_probe.cl", build_options({"OUTPUTS": OUTPUTS}))[1]
+    plain = cl.Program(device.context, _KERNEL).build(options=list(options))
     reference = _run(device, plain, a, b)
     for row, cols in _EXACT:
         np.testing.assert_array_equal(ours[:, row, cols], reference[:, row, cols], err_msg=f"output {row}")
