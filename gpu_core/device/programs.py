@@ -59,7 +59,7 @@ _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 # kernels then compute alike on PoCL and a GPU. Without it, on NVIDIA's
 # driver the kd-tree's ray shear (dir / dz, times corners 1e5 units away)
 # moved hit distances past the tests' 1e-4; it costs the image kernel there
-# 13-20% (README, "On a GPU").
+# 5-30% (README, "On a GPU").
 _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 
 
