@@ -40,6 +40,7 @@ from dataclasses import replace
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from frame import stage_line  # noqa: E402  (frame.py loads Blender only when run)
 from machine import describe  # noqa: E402
 
 SNAPSHOTS = os.path.join(ROOT, ".cache", "snapshots")
@@ -133,10 +134,6 @@ def first_frame(path: str, size: int, device_spec: str | None, no_denoise: bool)
         settings = replace(settings, denoise=False)
     seconds, ms = render_once(get_device(device_spec), snapshot["exports"][size], settings)
     print(json.dumps(dict(seconds=seconds, ms=ms)))
-
-
-def stage_line(ms: dict) -> str:
-    return " ".join(f"{key} {value:.0f}" for key, value in ms.items() if value >= 0.5)
 
 
 def run(device_spec: str | None, repeats: int, tag: str, presets: list[str], scenes: list[str] | None,
