@@ -40,6 +40,9 @@ _PHOTON_PARTS = ("geometry", "materials", "lights", "world")
 _PHOTON_PATH_KEY = len(_PHOTON_KNOBS) + 2  # the photon key's knobs, geometry and materials
 # settings the GI cache reads beyond the photon maps': a change runs its stages again
 _CACHE_KNOBS = ("gi_subpixels", "cache_seeds", "cache_alpha", "cut_delta", "gather_rays")
+# cache knobs outside the records key's shared part: the grid (records are in world space) and
+# the number of cache points (ordered: a view reads records gathered from at least as many)
+_RECORDS_OWN = ("gi_subpixels", "cache_seeds")
 
 
 @dataclass
@@ -79,7 +82,8 @@ class Plan:
     cache_reused: bool  # the GI cache held (same view, scene and settings) is used again
     cache_key: tuple | None  # of the GI cache this render uses
     records_reused: bool  # cache records of an earlier view of the same lit scene are kept
-    records_key: tuple | None  # of the cache records this render reads and leaves
+    records_key: tuple | None  # of the cache records this render leaves
+    records_source: tuple | None  # of the held cache records it reads (None: none)
     scene_defines: dict  # program features of every kernel that reads the scene
     image_defines: dict  # the image kernel's, scene features included
     programs: list[tuple[str, dict]]  # every program the render builds
@@ -153,7 +157,7 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     if "light_passes" in stages:
         image_defines["IMAGE_LIGHT_PASSES"] = 1
     emitters, maps, photon_key, reuse, reused, scales, counts = [], {}, None, {}, False, None, (0, 0)
-    cache_key, cache_reused, records_key, records_reused = None, False, None, False
+    cache_key, cache_reused, records_key, records_source, records_reused = None, False, None, None, False
     if settings.mode == "gi":
         image_defines["IMAGE_GI"] = 1
         emitters = emitter_powers(scene, tables)
@@ -171,11 +175,17 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
         cache_reused = cache_key == held.cache_key
         if cache_reused:
             reuse["gi_cache"] = "neither the view, the scene nor the GI settings changed"
-        # records hold for every view of the lit scene: the cache key but the camera and grid
-        records_key = photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS if k != "gi_subpixels")
-        records_reused = settings.cache_reuse and not cache_reused and records_key in held.records_keys
+        # records hold for every view of the lit scene: the cache key but the camera and grid,
+        # the number of cache points last (a view may read records of more)
+        records_key = (photon_key + tuple(getattr(settings, k) for k in _CACHE_KNOBS if k not in _RECORDS_OWN)
+                       + (settings.cache_seeds,))
+        if settings.cache_reuse and not cache_reused:
+            records_source = _records_source(records_key, held.records_keys)
+        records_reused = records_source is not None
         if records_reused:
-            reuse["cache_records"] = "only the view changed: records in world space are kept"
+            reuse["cache_records"] = ("only the view changed: records in world space are kept"
+                                      + ("" if records_source == records_key else
+                                         f" (those of {records_source[-1]} cache points, a finer pass's)"))
         stages += _gi_stages(maps, "_reused" if reused else "_reweighted" if scales is not None else "",
                              cache_reused, records_reused)
         if "glossy" in stages and maps["global"].startswith("built"):
@@ -192,7 +202,8 @@ def plan(scene: Scene, settings: RenderSettings, held: Held | None = None, edits
     the_plan = Plan(
         mode=settings.mode, stages=stages, changed=changed, digests=digests, generations=generations, tables=tables,
         emitters=emitters, photon_maps=maps, photon_counts=counts, photons_reused=reused, photon_scales=scales,
-        photon_key=photon_key, cache_reused=cache_reused, cache_key=cache_key, records_reused=records_reused, records_key=records_key, scene_defines=scene_defines,
+        photon_key=photon_key, cache_reused=cache_reused, cache_key=cache_key, records_reused=records_reused, records_key=records_key,
+        records_source=records_source, scene_defines=scene_defines,
         image_defines=image_defines, programs=[], device_bytes=0, largest_buffer=0, reuse=reuse, tree_rows=tree_rows)
     the_plan.device_bytes, the_plan.largest_buffer = _device_bytes(scene, settings, the_plan)
     if device is not None and hasattr(device, "device"):
@@ -241,6 +252,17 @@ def _features(scene: Scene, settings: RenderSettings, tables: SceneTables) -> li
     if settings.denoising_passes:
         features.append("denoising_passes")
     return features
+
+
+def _records_source(key: tuple, held_keys: tuple) -> tuple | None:
+    """The held cache records a view of ``key`` reads: its own, else those
+    of the same lit scene and knobs gathered from more cache points (a
+    viewport's coarse pass after a full one: records at least as dense),
+    the densest; None when neither is held."""
+    if key in held_keys:
+        return key
+    finer = [held for held in held_keys if held[:-1] == key[:-1] and held[-1] > key[-1]]
+    return max(finer, key=lambda held: held[-1]) if finer else None
 
 
 def _gi_stages(maps: dict[str, str], photons: str, cache_reused: bool, records_reused: bool) -> list[str]:

@@ -169,7 +169,7 @@ class Renderer:
         if the_plan.cache_reused and self._cache is not None:
             return self._cache
         self._held.cache_key, self._cache = None, None
-        records = self._records.get(the_plan.records_key) if the_plan.records_reused else None
+        records = self._records.get(the_plan.records_source) if the_plan.records_reused else None
         field_, records = render_gi(self.device, self._buffers, scene.camera.pixel_window, settings, maps,
                                     the_plan.stages, the_plan.scene_defines, timer, should_stop, records, say,
                                     self._samples)

@@ -147,6 +147,21 @@ def test_cache_records_are_kept_for_a_new_view_of_the_same_lit_scene_only():
     assert not plan(validate(room()), GI, held).records_reused  # the same view reuses the whole cache instead
 
 
+def test_a_view_with_fewer_cache_points_reads_the_records_of_more_but_not_the_reverse():
+    full = plan(validate(room()), GI)
+    held = Held(digests=full.digests, generations=full.generations, tables=full.tables,
+                photon_key=full.photon_key, cache_key=full.cache_key, records_keys=(full.records_key,))
+    coarse = dataclasses.replace(GI, cache_seeds=GI.cache_seeds // 16)
+    turned = plan(validate(moved_camera(room())), coarse, held)
+    assert turned.records_reused and turned.records_source == full.records_key != turned.records_key
+    assert "cache_records_reused" in turned.stages
+    # the full pass does not read the sparser records of a coarse one
+    held.records_keys = (turned.records_key,)
+    assert not plan(validate(moved_camera(room())), GI, held).records_reused
+    assert not plan(validate(moved_camera(room())), dataclasses.replace(coarse, gather_rays=GI.gather_rays // 2),
+                    Held(**{**held.__dict__, "records_keys": (full.records_key,)})).records_reused
+
+
 def test_a_photon_share_traces_fewer_photons_only_where_the_maps_held_cannot_serve():
     held = held_after(room(), GI)
     quick = dataclasses.replace(GI, photon_share=0.25)

@@ -39,6 +39,23 @@ def test_a_new_view_keeps_the_records_and_gathers_only_where_they_leave_gaps(dev
     assert np.percentile(np.abs(kept - fresh) / np.maximum(fresh, 1e-3), 95) < 0.1
 
 
+def test_a_coarse_pass_after_a_full_one_reads_its_denser_records(device):
+    # the viewport's coarse pass (a 16th of the cache points) after a full
+    # pass of another view: the full pass's records cover it
+    first, moved = _views()
+    coarse = dataclasses.replace(SETTINGS, cache_seeds=SETTINGS.cache_seeds // 16)
+    renderer = Renderer(device)
+    before = renderer.render(first, SETTINGS)
+    after = renderer.render(moved, coarse)
+    records = after.stats["gi"]["records"]
+    assert "cache_records_reused" in after.stats["plan"]
+    assert records["kept"] == before.stats["gi"]["sample_points"] > coarse.cache_seeds
+    assert records["new"] <= coarse.cache_seeds
+    fresh = Renderer(device).render(moved, SETTINGS).passes["Combined"][..., :3]
+    kept = after.passes["Combined"][..., :3]
+    assert np.isfinite(kept).all() and abs(kept.mean() / fresh.mean() - 1.0) < 0.02
+
+
 def test_with_reuse_off_every_view_is_the_fresh_render(device):
     first, moved = _views()
     off = dataclasses.replace(SETTINGS, cache_reuse=False)
