@@ -5,10 +5,13 @@
  *
  * Large-node stage: a node's points are a contiguous segment of the working
  * array, processed in chunks of POINT_BUILD_CHUNK. Each level cuts off
- * empty space or splits at the spatial median of the cell's longest axis,
- * then partitions the segments stably. The host does not read the number
- * of chunks: it launches the chunk kernels over a bound (n_active + n /
- * POINT_BUILD_CHUNK) and they find the count on the device. Small-node
+ * empty space and splits what keeps the points at the spatial median of
+ * its cell's longest axis (or, with no side to cut, splits the node so),
+ * then partitions the segments stably into the other of two point arrays,
+ * which becomes the working one. The host does not read the number of
+ * chunks: it launches the chunk kernels over a bound (n_active + n /
+ * POINT_BUILD_CHUNK) and they find the count on the device; each level
+ * lists the next one's nodes and chunks. Small-node
  * stage (<= POINT_BUILD_SMALL points): the small root's points are fixed;
  * a node is a bit mask over them, and the split is the candidate plane (a
  * point coordinate) of least VVH cost. Output stage: subtree
@@ -20,10 +23,32 @@
 /* axis value of a node whose points are all identical: split by count */
 #define BUILD_COUNT_SPLIT 4
 
-/* Side of a point of a large node; rank = its position in the node's segment. */
-inline bool PointBuild_goes_left(const BuildNode *nd, float4 p, int rank) {
-    if (nd->axis == BUILD_COUNT_SPLIT) return rank < nd->count / 2;
-    return Axis_of(p, nd->axis) < nd->split;
+/* The plane that partitions an active large node's points this level: its
+ * own split, or, after an empty-space cut, the split of X, the part that
+ * keeps the points (x_plane: X's split, its axis, 1 when X is the right
+ * child, as int bits; axis -1 when there is no X). */
+typedef struct {
+    int axis;
+    float split;
+} PointBuildPlane;
+
+inline PointBuildPlane PointBuild_partition(const BuildNode *nd, float4 x_plane) {
+    int x_axis = as_int(x_plane.y);
+    return x_axis >= 0 ? (PointBuildPlane){x_axis, x_plane.x} : (PointBuildPlane){nd->axis, nd->split};
+}
+
+/* Side of a point of a large node of `count` points; rank = its position in
+ * the node's segment. */
+inline bool PointBuild_goes_left(PointBuildPlane plane, int count, float4 p, int rank) {
+    if (plane.axis == BUILD_COUNT_SPLIT) return rank < count / 2;
+    return Axis_of(p, plane.axis) < plane.split;
+}
+
+/* Points of active node j that go left, from the inclusive scans of the
+ * chunks per node (chunk_end) and of the chunks' left counts (left_end). */
+inline int PointBuild_left_count(const __global int *chunk_end, const __global int *left_end, int j) {
+    int first = j > 0 ? chunk_end[j - 1] : 0;
+    return left_end[chunk_end[j] - 1] - (first > 0 ? left_end[first - 1] : 0);
 }
 
 /* Store l and r, the children of node id at depth `depth`, at c0 and c0 + 1
@@ -46,31 +71,24 @@ inline int PointBuild_chunk_total(const __global int *chunk_end, int n_active) {
     return chunk_end[n_active - 1];
 }
 
-/* Number of chunks of each active node. */
-__kernel void PointBuild_chunk_counts(const __global int *active, const __global BuildNode *nodes,
-                                 __global int *counts, const int n_active) {
-    int j = get_global_id(0);
-    if (j >= n_active) return;
-    counts[j] = (nodes[active[j]].count + POINT_BUILD_CHUNK - 1) / POINT_BUILD_CHUNK;
-}
-
-/* The chunks of each active node; chunk_end is the inclusive scan of counts. */
-__kernel void PointBuild_chunks(const __global int *active, const __global BuildNode *nodes,
-                           const __global int *chunk_end, __global Chunk *chunks,
-                           const int n_active) {
-    int j = get_global_id(0);
-    if (j >= n_active) return;
-    BuildNode nd = nodes[active[j]];
-    int first = j > 0 ? chunk_end[j - 1] : 0;
-    int n = chunk_end[j] - first;
+/* The `n` chunks of the node of `count` points from `start`, the
+ * active list's `slot`-th, at chunks[at...]. */
+inline void PointBuild_write_chunks(__global Chunk *chunks, int at, int n, int slot, int start, int count) {
     for (int c = 0; c < n; ++c) {
         Chunk ch;
-        ch.slot = j;
-        ch.start = nd.start + c * POINT_BUILD_CHUNK;
-        ch.count = min(POINT_BUILD_CHUNK, nd.count - c * POINT_BUILD_CHUNK);
+        ch.slot = slot;
+        ch.start = start + c * POINT_BUILD_CHUNK;
+        ch.count = min(POINT_BUILD_CHUNK, count - c * POINT_BUILD_CHUNK);
         ch.rank = c;
-        chunks[first + c] = ch;
+        chunks[at + c] = ch;
     }
+}
+
+/* The root's chunks (chunk_end[0]: their number, set by the host). */
+__kernel void PointBuild_root_chunks(const __global BuildNode *nodes, const __global int *chunk_end,
+                                     __global Chunk *chunks) {
+    if (get_global_id(0) != 0) return;
+    PointBuild_write_chunks(chunks, 0, chunk_end[0], 0, nodes[0].start, nodes[0].count);
 }
 
 /* Bounding box of each chunk's points. */
@@ -90,14 +108,36 @@ __kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __glob
     chunk_hi[c] = hi;
 }
 
-/* Per active node: reduce its chunks to the tight box, then choose an
- * empty-space cut (the side with the largest empty fraction of the cell,
- * when over empty_ratio) or a spatial-median split of the cell's longest
- * axis. A cut leaves the points on one side and nothing on the other. */
+/* Spatial-median split of the longest axis of the cell lo..hi that the
+ * points (tight box tlo..thi) span; BUILD_COUNT_SPLIT when they all coincide. */
+inline PointBuildPlane PointBuild_median(float4 lo, float4 hi, float4 tlo, float4 thi) {
+    float4 ext = hi - lo, text = thi - tlo;
+    int a = 0;
+    float longest = -1.0f;
+    for (int k = 0; k < 3; ++k) {
+        if (Axis_of(text, k) > 0.0f && Axis_of(ext, k) > longest) {
+            longest = Axis_of(ext, k);
+            a = k;
+        }
+    }
+    if (longest < 0.0f) return (PointBuildPlane){BUILD_COUNT_SPLIT, tlo.x};
+    float t0 = Axis_of(tlo, a), t1 = Axis_of(thi, a);
+    float split = 0.5f * (Axis_of(lo, a) + Axis_of(hi, a));
+    if (!(split > t0 && split <= t1)) split = 0.5f * (t0 + t1);
+    if (!(split > t0)) split = t1; /* t0 and t1 adjacent floats */
+    return (PointBuildPlane){a, split};
+}
+
+/* Per active node: reduce its chunks to the tight box, then cut off empty
+ * space (the side with the largest empty fraction of the cell, when over
+ * empty_ratio) and split the part that keeps the points, X, at the spatial
+ * median of its cell's longest axis (x_plane; X is split one level deeper,
+ * in the same pass), or, with no side to cut, split the node itself there.
+ * A cut leaves the points on one side and nothing on the other. */
 __kernel void PointBuild_large_decide(const __global int *active, __global BuildNode *nodes,
                                  const __global int *chunk_end, const __global float4 *chunk_lo,
                                  const __global float4 *chunk_hi, const float empty_ratio,
-                                 const int n_active) {
+                                 const int max_depth, __global float4 *x_plane, const int n_active) {
     int j = get_global_id(0);
     if (j >= n_active) return;
     int id = active[j];
@@ -112,10 +152,8 @@ __kernel void PointBuild_large_decide(const __global int *active, __global Build
     if (!(nd.lo.x <= nd.hi.x)) {
         nd.lo = tlo;
         nd.hi = thi;
-        nodes[id] = nd;
     }
     float4 ext = nd.hi - nd.lo;
-    float4 text = thi - tlo;
 
     /* empty-space cut */
     float best = empty_ratio;
@@ -131,45 +169,32 @@ __kernel void PointBuild_large_decide(const __global int *active, __global Build
         if (high > best) { best = high; cut_axis = a; cut_low = false; }
     }
     if (cut_axis >= 0) {
-        nd.axis = cut_axis;
         /* low cut: every point is >= tlo goes right; high cut: every point is
          * < the next float above thi goes left */
-        nd.split = cut_low ? Axis_of(tlo, cut_axis) : nextafter(Axis_of(thi, cut_axis), INFINITY);
+        float plane = cut_low ? Axis_of(tlo, cut_axis) : nextafter(Axis_of(thi, cut_axis), INFINITY);
+        nd.axis = cut_axis;
+        nd.split = plane;
         nodes[id] = nd;
+        float4 xlo = cut_low ? Axis_with(nd.lo, cut_axis, plane) : nd.lo;
+        float4 xhi = cut_low ? nd.hi : Axis_with(nd.hi, cut_axis, plane);
+        /* X at the depth limit stays unsplit (a leaf) */
+        PointBuildPlane x = nd.depth + 1 < max_depth ? PointBuild_median(xlo, xhi, tlo, thi) : (PointBuildPlane){-1, 0.0f};
+        x_plane[j] = (float4)(x.split, as_float(x.axis), as_float(cut_low ? 1 : 0), 0.0f);
         return;
     }
-
-    /* median split of the longest cell axis that the points actually span */
-    int a = 0;
-    float longest = -1.0f;
-    for (int k = 0; k < 3; ++k) {
-        if (Axis_of(text, k) > 0.0f && Axis_of(ext, k) > longest) {
-            longest = Axis_of(ext, k);
-            a = k;
-        }
-    }
-    if (longest < 0.0f) {
-        /* all points identical */
-        nd.axis = BUILD_COUNT_SPLIT;
-        nd.split = tlo.x;
-        nodes[id] = nd;
-        return;
-    }
-    float t0 = Axis_of(tlo, a), t1 = Axis_of(thi, a);
-    float split = 0.5f * (Axis_of(nd.lo, a) + Axis_of(nd.hi, a));
-    if (!(split > t0 && split <= t1)) split = 0.5f * (t0 + t1);
-    if (!(split > t0)) split = t1; /* t0 and t1 adjacent floats */
-    nd.axis = a;
-    nd.split = split;
+    PointBuildPlane m = PointBuild_median(nd.lo, nd.hi, tlo, thi);
+    nd.axis = m.axis;
+    nd.split = m.split;
     nodes[id] = nd;
+    x_plane[j] = (float4)(0.0f, as_float(-1), 0.0f, 0.0f);
 }
 
 /* Points of each chunk that go to the left child; 0 past the last chunk,
  * up to the bound, so that the bound's prefix sums hold. */
 __kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __global int *active,
-                                     const __global BuildNode *nodes, const __global float4 *pts,
-                                     __global int *chunk_left, const __global int *chunk_end,
-                                     const int n_active, const int bound) {
+                                     const __global BuildNode *nodes, const __global float4 *x_plane,
+                                     const __global float4 *pts, __global int *chunk_left,
+                                     const __global int *chunk_end, const int n_active, const int bound) {
     int c = get_global_id(0);
     if (c >= bound) return;
     if (c >= PointBuild_chunk_total(chunk_end, n_active)) {
@@ -178,57 +203,117 @@ __kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __
     }
     Chunk ch = chunks[c];
     BuildNode nd = nodes[active[ch.slot]];
+    PointBuildPlane plane = PointBuild_partition(&nd, x_plane[ch.slot]);
     int n = 0;
     for (int i = 0; i < ch.count; ++i)
-        n += PointBuild_goes_left(&nd, pts[ch.start + i], ch.rank * POINT_BUILD_CHUNK + i) ? 1 : 0;
+        n += PointBuild_goes_left(plane, nd.count, pts[ch.start + i], ch.rank * POINT_BUILD_CHUNK + i) ? 1 : 0;
     chunk_left[c] = n;
 }
 
-/* Class of a new node as two counters in one long: low word 1 when it is
- * large (split again), high word 1 when it is a small root; 0 for a leaf. */
-inline long PointBuild_class_flags(int count, int depth, int max_depth) {
-    if (depth >= max_depth) return 0;
-    if (count > POINT_BUILD_SMALL) return 1;
-    return count >= 2 ? ((long)1 << 32) : 0;
+/* Class of a new node as counters, scanned together: s0 1 when it is
+ * large (split again) and s2 its chunks, s1 1 when it is a small root;
+ * all 0 for a leaf. */
+inline int8 PointBuild_class(int count, int depth, int max_depth) {
+    int8 c = (int8)(0);
+    if (depth >= max_depth) return c;
+    if (count > POINT_BUILD_SMALL) {
+        c.s0 = 1;
+        c.s2 = (count + POINT_BUILD_CHUNK - 1) / POINT_BUILD_CHUNK;
+    } else if (count >= 2) {
+        c.s1 = 1;
+    }
+    return c;
 }
 
-/* Create both children of every active node at child_base + 2 j, with
- * their classes (PointBuild_class_flags); left_end is the inclusive scan of
- * the chunks' left counts. */
+/* Two unused slots of the node table at `at` (a node without a cut-off X
+ * leaves its X's children's slots empty): count -1, never referenced. */
+inline void PointBuild_store_holes(__global BuildNode *nodes, int at) {
+    BuildNode hole;
+    hole.lo = hole.hi = (float4)(0.0f);
+    hole.start = hole.root = hole.left = hole.axis = hole.depth = -1;
+    hole.count = -1;
+    hole.mask = 0u;
+    hole.split = 0.0f;
+    nodes[at] = hole;
+    nodes[at + 1] = hole;
+}
+
+/* The cells of the two sides of `plane` within nd's cell. */
+inline void PointBuild_sides(const BuildNode *nd, PointBuildPlane plane, BuildNode *l, BuildNode *r) {
+    l->lo = r->lo = nd->lo;
+    l->hi = r->hi = nd->hi;
+    if (plane.axis != BUILD_COUNT_SPLIT) {
+        l->hi = Axis_with(l->hi, plane.axis, plane.split);
+        r->lo = Axis_with(r->lo, plane.axis, plane.split);
+    }
+    l->mask = r->mask = 0u;
+    l->root = r->root = -1;
+}
+
+/* Create the children of every active node j at child_base + 2 j and, after
+ * an empty-space cut, the children of X at child_base + 2 n_active + 2 j
+ * (holes otherwise), with their classes (PointBuild_class) in the
+ * same slots of `classes`; left_end is the inclusive scan of the chunks'
+ * left counts. */
 __kernel void PointBuild_large_split(const __global int *active, __global BuildNode *nodes,
                                 const __global int *chunk_end, const __global int *left_end,
-                                const int child_base, const int max_depth, __global long *classes,
-                                const int n_active) {
+                                const __global float4 *x_plane, const int child_base, const int max_depth,
+                                __global int8 *classes, const int n_active) {
     int j = get_global_id(0);
     if (j >= n_active) return;
     int id = active[j];
     BuildNode nd = nodes[id];
-    int first = j > 0 ? chunk_end[j - 1] : 0;
-    int n_left = left_end[chunk_end[j] - 1] - (first > 0 ? left_end[first - 1] : 0);
+    int n_left = PointBuild_left_count(chunk_end, left_end, j);
+    float4 xp = x_plane[j];
+    int x_axis = as_int(xp.y);
+    int x_base = child_base + 2 * n_active + 2 * j;
+    __global int8 *cls = classes + 2 * j, *x_cls = classes + 2 * n_active + 2 * j;
     BuildNode l, r;
-    l.lo = r.lo = nd.lo;
-    l.hi = r.hi = nd.hi;
-    if (nd.axis != BUILD_COUNT_SPLIT) {
-        l.hi = Axis_with(l.hi, nd.axis, nd.split);
-        r.lo = Axis_with(r.lo, nd.axis, nd.split);
+    PointBuild_sides(&nd, (PointBuildPlane){nd.axis, nd.split}, &l, &r);
+    if (x_axis < 0) {
+        l.start = nd.start;
+        l.count = n_left;
+        r.start = nd.start + n_left;
+        r.count = nd.count - n_left;
+        PointBuild_store_children(nodes, id, child_base + 2 * j, l, r, nd.depth);
+        PointBuild_store_holes(nodes, x_base);
+        cls[0] = PointBuild_class(l.count, nd.depth + 1, max_depth);
+        cls[1] = PointBuild_class(r.count, nd.depth + 1, max_depth);
+        x_cls[0] = x_cls[1] = (int8)(0);
+        return;
     }
-    l.start = nd.start;
-    l.count = n_left;
-    r.start = nd.start + n_left;
-    r.count = nd.count - n_left;
-    l.mask = r.mask = 0u;
-    l.root = r.root = -1;
+    /* an empty-space cut: an empty leaf and X, which holds every point and
+     * is split by x_plane */
+    bool x_right = as_int(xp.z) != 0;
+    l.start = r.start = nd.start;
+    l.count = x_right ? 0 : nd.count;
+    r.count = x_right ? nd.count : 0;
     PointBuild_store_children(nodes, id, child_base + 2 * j, l, r, nd.depth);
-    classes[2 * j] = PointBuild_class_flags(l.count, nd.depth + 1, max_depth);
-    classes[2 * j + 1] = PointBuild_class_flags(r.count, nd.depth + 1, max_depth);
+    int xid = child_base + 2 * j + (x_right ? 1 : 0);
+    BuildNode x = x_right ? r : l;
+    x.depth = nd.depth + 1;
+    PointBuildPlane xs = (PointBuildPlane){x_axis, xp.x};
+    BuildNode xl, xr;
+    PointBuild_sides(&x, xs, &xl, &xr);
+    xl.start = nd.start;
+    xl.count = n_left;
+    xr.start = nd.start + n_left;
+    xr.count = nd.count - n_left;
+    PointBuild_store_children(nodes, xid, x_base, xl, xr, x.depth);
+    nodes[xid].axis = xs.axis;
+    nodes[xid].split = xs.split;
+    cls[0] = cls[1] = (int8)(0);
+    x_cls[0] = PointBuild_class(xl.count, x.depth + 1, max_depth);
+    x_cls[1] = PointBuild_class(xr.count, x.depth + 1, max_depth);
 }
 
-/* Stable partition of each chunk's points into its node's two children. */
+/* Stable partition of each chunk's points to the two sides of its node's
+ * partition plane (its children's, or after a cut its X's, segments). */
 __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __global int *active,
-                                  const __global BuildNode *nodes, const __global float4 *pts,
-                                  __global float4 *out, const __global int *chunk_left,
-                                  const __global int *left_end, const __global int *chunk_end,
-                                  const int n_active) {
+                                  const __global BuildNode *nodes, const __global float4 *x_plane,
+                                  const __global float4 *pts, __global float4 *out,
+                                  const __global int *chunk_left, const __global int *left_end,
+                                  const __global int *chunk_end, const int n_active) {
     int c = get_global_id(0);
     if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
     Chunk ch = chunks[c];
@@ -236,34 +321,40 @@ __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __glo
     int first = c - ch.rank;
     int left_before = (left_end[c] - chunk_left[c]) - (first > 0 ? left_end[first - 1] : 0);
     int right_before = ch.rank * POINT_BUILD_CHUNK - left_before;
-    int n_left = nodes[nd.left].count;
+    int n_left = PointBuild_left_count(chunk_end, left_end, ch.slot);
+    PointBuildPlane plane = PointBuild_partition(&nd, x_plane[ch.slot]);
     for (int i = 0; i < ch.count; ++i) {
         float4 p = pts[ch.start + i];
-        if (PointBuild_goes_left(&nd, p, ch.rank * POINT_BUILD_CHUNK + i))
+        if (PointBuild_goes_left(plane, nd.count, p, ch.rank * POINT_BUILD_CHUNK + i))
             out[nd.start + left_before++] = p;
         else
             out[nd.start + n_left + right_before++] = p;
     }
 }
 
-/* Copy the partitioned chunks back to the working array. */
-__kernel void PointBuild_chunk_copy(const __global Chunk *chunks, const __global float4 *from,
-                               __global float4 *to, const __global int *chunk_end, const int n_active) {
-    int c = get_global_id(0);
-    if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
-    Chunk ch = chunks[c];
-    for (int i = 0; i < ch.count; ++i) to[ch.start + i] = from[ch.start + i];
-}
-
-/* The new nodes (base + i) into the next level's large list and the small
- * roots' list, in order, at the exclusive prefix sums of their class flags. */
-__kernel void PointBuild_lists(const __global long *classes, const __global long *scanned, const int base,
-                               const int n, __global int *large, __global int *small) {
+/* The new nodes (base + i) into the next level's large list, with its
+ * chunks (chunk_end: their inclusive scan), and the small roots' list, in
+ * order, at the exclusive prefix sums of their classes. A node that
+ * leaves the large stage (a small root, a leaf with points) has its points
+ * copied from `from`, the array the level partitioned into, to `to`, the
+ * one the next level partitions into: both hold them from then on. */
+__kernel void PointBuild_lists(const __global int8 *classes, const __global int8 *scanned, const int base,
+                               const int n, const __global BuildNode *nodes, const __global float4 *from,
+                               __global float4 *to, __global int *large, __global int *small,
+                               __global int *chunk_end, __global Chunk *chunks) {
     int i = get_global_id(0);
     if (i >= n) return;
-    long c = classes[i], at = scanned[i];
-    if (c & 0xffffffffL) large[(int)(at & 0xffffffffL)] = base + i;
-    if (c >> 32) small[(int)(at >> 32)] = base + i;
+    int8 c = classes[i], at = scanned[i];
+    BuildNode nd = nodes[base + i];
+    if (c.s0) {
+        large[at.s0] = base + i;
+        chunk_end[at.s0] = at.s2 + c.s2;
+        PointBuild_write_chunks(chunks, at.s2, c.s2, at.s0, nd.start, nd.count);
+        return;
+    }
+    if (c.s1) small[at.s1] = base + i;
+    if (nd.left < 0 && nd.count > 0)
+        for (int k = nd.start; k < nd.start + nd.count; ++k) to[k] = from[k];
 }
 
 /* ---- small-node stage ---------------------------------------------------- */
@@ -420,17 +511,12 @@ inline int PointBuild_leaf_point(const BuildNode *nd, uint *rest, int i) {
     return nd->start + k;
 }
 
-/* Bottom-up over one batch of nodes (children live in later batches):
- * subtree size and photon sums, from the points at a leaf and from the
- * two children otherwise. */
-__kernel void PointBuild_sums(const __global BuildNode *nodes, const __global float4 *pts,
-                         const __global float4 *power, const __global float4 *dir,
-                         const __global float4 *normal, const int has_photons,
-                         __global int *size, __global BuildSums *sums, const int base,
-                         const int n) {
-    int i = get_global_id(0);
-    if (i >= n) return;
-    int id = base + i;
+/* Subtree size and photon sums of node id: from the points at a leaf and
+ * from the two children (done already) otherwise. */
+inline void PointBuild_node_sums(int id, const __global BuildNode *nodes, const __global float4 *pts,
+                                 const __global float4 *power, const __global float4 *dir,
+                                 const __global float4 *normal, int has_photons, __global int *size,
+                                 __global BuildSums *sums) {
     BuildNode nd = nodes[id];
     BuildSums s;
     if (nd.left >= 0) {
@@ -469,20 +555,53 @@ __kernel void PointBuild_sums(const __global BuildNode *nodes, const __global fl
     sums[id] = s;
 }
 
-/* Top-down over one batch: preorder address and first point of both
- * children of every inner node (the root's are 0, set by the host). */
-__kernel void PointBuild_preorder(const __global BuildNode *nodes, const __global int *size,
-                             __global int *addr, __global int *first, const int base,
-                             const int n) {
+/* Bottom-up over one batch of nodes (their children live in later
+ * batches, but for the children of cut-off parts X, ids x_first to x_end
+ * - 1, which the same pass made: X's work item does them first). */
+__kernel void PointBuild_sums(const __global BuildNode *nodes, const __global float4 *pts,
+                         const __global float4 *power, const __global float4 *dir,
+                         const __global float4 *normal, const int has_photons,
+                         __global int *size, __global BuildSums *sums, const int base,
+                         const int n, const int x_first, const int x_end) {
     int i = get_global_id(0);
     if (i >= n) return;
     int id = base + i;
-    BuildNode nd = nodes[id];
-    if (nd.left < 0) return;
-    addr[nd.left] = addr[id] + 1;
-    addr[nd.left + 1] = addr[id] + 1 + size[nd.left];
-    first[nd.left] = first[id];
-    first[nd.left + 1] = first[id] + nodes[nd.left].count;
+    int left = nodes[id].left;
+    if (nodes[id].count < 0) return; /* a hole */
+    if (left >= x_first && left < x_end) {
+        PointBuild_node_sums(left, nodes, pts, power, dir, normal, has_photons, size, sums);
+        PointBuild_node_sums(left + 1, nodes, pts, power, dir, normal, has_photons, size, sums);
+    }
+    PointBuild_node_sums(id, nodes, pts, power, dir, normal, has_photons, size, sums);
+}
+
+/* Preorder address and first point of both children of node id (inner). */
+inline void PointBuild_child_order(int id, int left, const __global BuildNode *nodes, const __global int *size,
+                                   __global int *addr, __global int *first) {
+    addr[left] = addr[id] + 1;
+    addr[left + 1] = addr[id] + 1 + size[left];
+    first[left] = first[id];
+    first[left + 1] = first[id] + nodes[left].count;
+}
+
+/* Top-down over one batch: the children's preorder addresses and first
+ * points of every inner node (the root's are 0, set by the host), and of
+ * the children of X's children (ids x_first to x_end - 1: made in the same
+ * pass, so in no batch of their own). */
+__kernel void PointBuild_preorder(const __global BuildNode *nodes, const __global int *size,
+                             __global int *addr, __global int *first, const int base,
+                             const int n, const int x_first, const int x_end) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int id = base + i;
+    int left = nodes[id].left;
+    if (left < 0) return;
+    PointBuild_child_order(id, left, nodes, size, addr, first);
+    if (left < x_first || left >= x_end) return;
+    for (int c = left; c < left + 2; ++c) {
+        int grand = nodes[c].left;
+        if (grand >= 0) PointBuild_child_order(c, grand, nodes, size, addr, first);
+    }
 }
 
 /* Every node to its preorder slot: the traversal node, the payload with
@@ -500,6 +619,7 @@ __kernel void PointBuild_emit(const __global BuildNode *nodes, const __global Bu
     int id = get_global_id(0);
     if (id >= n) return;
     BuildNode nd = nodes[id];
+    if (nd.count < 0) return; /* a hole */
     BuildSums s = sums[id];
     int at = addr[id];
     int f = first[id];

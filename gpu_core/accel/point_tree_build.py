@@ -4,7 +4,10 @@ The host loops over tree levels and reads back only list sizes (one read
 per level); every kernel works on all nodes (or point chunks) of a level at
 once:
 
-* large-node stage: median splits and empty-space cuts;
+* large-node stage: an empty-space cut and a median split of what it keeps
+  per node and level (or a median split alone), the points partitioned
+  between two arrays in turn, the next level's nodes and chunks listed on
+  the device;
 * small-node stage: VVH splits over bit masks of each small root's points;
 * output stage: sums bottom-up (sizes, photon power, positions), preorder
   addresses top-down, then the traversal nodes, the node payloads
@@ -17,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl.array as cla
+import pyopencl.cltypes as cltypes
 
 from ..device import Device, primitives
 from ..device.constants import POINT_BUILD_SMALL as SMALL_MAX
@@ -84,8 +88,9 @@ def points_on_device(device: Device, points: np.ndarray) -> cla.Array:
 
 
 class _Build:
-    """The state of one build: the node table, the working point array and
-    the batches of nodes made per level (children after parents)."""
+    """The state of one build: the node table, the working point array (and
+    the other one a level partitions into) and the batches of nodes made per
+    level (children after parents)."""
 
     def __init__(self, device: Device, points: cla.Array, photons: tuple | None, params: BuildParams):
         self.device = device
@@ -102,7 +107,7 @@ class _Build:
         root["lo"], root["hi"] = np.inf, -np.inf
         root["count"], root["root"], root["left"] = n, -1, -1
         device.write(self.table.array.data, root)
-        self.batches = [(0, 1)]
+        self.batches = [(0, 1, 0, 0)]  # first id, count, and the id range of the X children made with them
         self.max_depth = np.int32(min(params.max_depth, MAX_DEPTH))
         self.small_parts = [device.array_from(np.zeros(1, np.int32))] if 2 <= n <= SMALL_MAX else []
         self.large_levels = self.small_levels = 0
@@ -112,54 +117,62 @@ class _Build:
 
     def large_stage(self) -> None:
         """Median splits and empty-space cuts, level by level."""
+        if self.n <= SMALL_MAX:
+            return
         dev = self.device
         active = dev.array_from(np.zeros(1, np.int32))
-        n_active = 1 if self.n > SMALL_MAX else 0
+        chunk_end = dev.array_from(np.array([-(-self.n // CHUNK_POINTS)], np.int32))
+        chunks = dev.array(1 + self.n // CHUNK_POINTS, CHUNK_DTYPE)
+        self.launch("PointBuild_root_chunks", 1, self.table.array.data, chunk_end.data, chunks.data)
+        n_active = 1
         while n_active:
             self.large_levels += 1
-            active, n_active = self._large_level(active, n_active)
+            active, chunk_end, chunks, n_active = self._large_level(active, chunk_end, chunks, n_active)
 
-    def _large_level(self, active: cla.Array, n_active: int) -> tuple[cla.Array, int]:
+    def _large_level(self, active: cla.Array, chunk_end: cla.Array, chunks: cla.Array, n_active: int) -> tuple:
+        """One level over the active nodes, whose chunks (and their inclusive
+        scan per node, chunk_end) the last level listed; returns the next
+        level's."""
         dev, nodes, i32 = self.device, self.table.array, np.int32
-        # the chunks of every active node (their count stays on the device:
-        # the chunk kernels run over a bound), and their bounds
-        chunk_end = dev.array(n_active, np.int32)
-        self.launch("PointBuild_chunk_counts", n_active, active.data, nodes.data, chunk_end.data, i32(n_active))
-        primitives.scan(dev, chunk_end.data, n_active, inclusive=True)
+        # chunk bounds (the chunk count stays on the device: the chunk
+        # kernels run over a bound)
         bound = n_active + self.n // CHUNK_POINTS
-        chunks = dev.array(bound, CHUNK_DTYPE)
         chunk_lo, chunk_hi = dev.array(4 * bound, np.float32), dev.array(4 * bound, np.float32)
         chunk_left, left_end = dev.array(bound, np.int32), dev.array(bound, np.int32)
         level = (chunk_end.data, i32(n_active))
-        self.launch("PointBuild_chunks", n_active, active.data, nodes.data, chunk_end.data, chunks.data, i32(n_active))
         self.launch("PointBuild_chunk_bounds", bound, chunks.data, self.work.data, chunk_lo.data, chunk_hi.data, *level)
-        # each node's cut or split, then its points partitioned stably
+        # each node's cut and the split of what it keeps, or its split; then
+        # its points partitioned stably
+        x_plane = dev.array(4 * n_active, np.float32)
         self.launch("PointBuild_large_decide", n_active, active.data, nodes.data, chunk_end.data, chunk_lo.data,
-                    chunk_hi.data, np.float32(self.params.empty_ratio), i32(n_active))
-        self.launch("PointBuild_chunk_count_left", bound, chunks.data, active.data, nodes.data, self.work.data,
-                    chunk_left.data, *level, i32(bound))
+                    chunk_hi.data, np.float32(self.params.empty_ratio), self.max_depth, x_plane.data, i32(n_active))
+        self.launch("PointBuild_chunk_count_left", bound, chunks.data, active.data, nodes.data, x_plane.data,
+                    self.work.data, chunk_left.data, *level, i32(bound))
         primitives.scan(dev, chunk_left.data, bound, out=left_end.data, inclusive=True)
-        base = self.table.reserve(2 * n_active)
+        # children two per node, then the children of the cut-off parts two per node (holes where none)
+        new = 4 * n_active
+        base = self.table.reserve(new)
         nodes = self.table.array
-        classes = dev.array(2 * n_active, np.int64)
+        classes = dev.array(new, cltypes.int8)
         self.launch("PointBuild_large_split", n_active, active.data, nodes.data, chunk_end.data, left_end.data,
-                    i32(base), self.max_depth, classes.data, i32(n_active))
-        self.launch("PointBuild_chunk_scatter", bound, chunks.data, active.data, nodes.data, self.work.data,
-                    self.scratch.data, chunk_left.data, left_end.data, *level)
-        self.launch("PointBuild_chunk_copy", bound, chunks.data, self.scratch.data, self.work.data, *level)
-        self.batches.append((base, 2 * n_active))
-        # children: the next level's large nodes and the small roots, counted
-        # together (low and high words of one long) and read in one go
-        scanned = dev.array(2 * n_active, np.int64)
-        total = primitives.scan(dev, classes.data, 2 * n_active, kind="long", out=scanned.data)
-        large, small = dev.array(2 * n_active, np.int32), dev.array(2 * n_active, np.int32)
-        self.launch("PointBuild_lists", 2 * n_active, classes.data, scanned.data, i32(base), i32(2 * n_active),
-                    large.data, small.data)
-        counts = int(dev.scalar(total, np.int64))
-        n_large, n_small = counts & 0xFFFFFFFF, counts >> 32
+                    x_plane.data, i32(base), self.max_depth, classes.data, i32(n_active))
+        self.launch("PointBuild_chunk_scatter", bound, chunks.data, active.data, nodes.data, x_plane.data,
+                    self.work.data, self.scratch.data, chunk_left.data, left_end.data, *level)
+        self.work, self.scratch = self.scratch, self.work  # the partitioned points are the working array now
+        # one batch: the children of the cut-off parts (after them) are done with their parents
+        self.batches.append((base, 2 * n_active, base + 2 * n_active, base + new))
+        # new nodes: the next level's large nodes with their chunks, and the
+        # small roots, counted together (lanes of one int8) and read in one go
+        scanned = dev.array(new, cltypes.int8)
+        total = primitives.scan(dev, classes.data, new, kind="int8", out=scanned.data)
+        large, small, next_end = (dev.array(new, np.int32) for _ in range(3))
+        next_chunks = dev.array(new + self.n // CHUNK_POINTS, CHUNK_DTYPE)
+        self.launch("PointBuild_lists", new, classes.data, scanned.data, i32(base), i32(new), nodes.data,
+                    self.work.data, self.scratch.data, large.data, small.data, next_end.data, next_chunks.data)
+        n_large, n_small = (int(v) for v in dev.read(total, 2, np.int32))
         if n_small:
             self.small_parts.append(small[:n_small])
-        return large, n_large
+        return large, next_end, next_chunks, n_large
 
     def small_stage(self) -> None:
         """VVH splits over bit masks of each small root's points."""
@@ -200,7 +213,7 @@ class _Build:
         children = dev.array(2 * n_split, np.int32)
         self.launch("PointBuild_small_split", n_split, splitting, active.data, self.table.array.data, cand.data,
                     self.masks.data, i32(base), children.data, i32(n_split))
-        self.batches.append((base, 2 * n_split))
+        self.batches.append((base, 2 * n_split, 0, 0))
         return children, 2 * n_split
 
     def output_stage(self) -> tuple:
@@ -209,15 +222,18 @@ class _Build:
         dev, i32 = self.device, np.int32
         n, n_nodes, ph, nodes = self.n, self.table.count, self.photons, self.table.array
         size, sums = dev.array(n_nodes, np.int32), dev.array(n_nodes, BUILD_SUMS_DTYPE)
-        for base, count in reversed(self.batches):
+        for base, count, x_first, x_end in reversed(self.batches):
             self.launch("PointBuild_sums", count, nodes.data, self.work.data, ph[0].data, ph[1].data, ph[2].data,
-                        self.has_photons, size.data, sums.data, i32(base), i32(count))
+                        self.has_photons, size.data, sums.data, i32(base), i32(count), i32(x_first), i32(x_end))
+        # the tree's nodes: the root's subtree (the table also holds unused slots)
+        self.node_count = int(dev.scalar(size.data, np.int32))
         addr, first = dev.array(n_nodes, np.int32), dev.array(n_nodes, np.int32)
         dev.fill(addr.data, 0, addr.nbytes)
         dev.fill(first.data, 0, first.nbytes)
-        for base, count in self.batches:
-            self.launch("PointBuild_preorder", count, nodes.data, size.data, addr.data, first.data, i32(base), i32(count))
-        out_nodes, out_info = dev.array(n_nodes, KDNODE_DTYPE), dev.array(n_nodes, POINT_NODE_DTYPE)
+        for base, count, x_first, x_end in self.batches:
+            self.launch("PointBuild_preorder", count, nodes.data, size.data, addr.data, first.data, i32(base), i32(count),
+                        i32(x_first), i32(x_end))
+        out_nodes, out_info = dev.array(self.node_count, KDNODE_DTYPE), dev.array(self.node_count, POINT_NODE_DTYPE)
         out_pts = dev.array(max(n, 1) * 4, np.float32).reshape(max(n, 1), 4)
         out_ph = [dev.array(max(n, 1) * 4, np.float32).reshape(max(n, 1), 4) for _ in range(3)]
         self.launch("PointBuild_emit", n_nodes, nodes.data, sums.data, addr.data, first.data, self.work.data,
@@ -251,11 +267,11 @@ def build(device: Device, points: cla.Array, photons: tuple | None, params: Buil
     with timer.stage("output"):
         out_nodes, out_info, out_pts, out_ph = state.output_stage()
     stats = {
-        "points": state.n, "nodes": state.table.count, "large_levels": state.large_levels,
+        "points": state.n, "nodes": state.node_count, "large_levels": state.large_levels,
         "small_levels": state.small_levels, "small_roots": state.n_roots, "radius": state.radius, "ms": timer.ms,
     }
     with_photons = photons is not None
     return BuiltTree(
         nodes=out_nodes, info=out_info, points=out_pts,
         power=out_ph[0] if with_photons else None, direction=out_ph[1] if with_photons else None,
-        normal=out_ph[2] if with_photons else None, node_count=state.table.count, radius=state.radius, stats=stats)
+        normal=out_ph[2] if with_photons else None, node_count=state.node_count, radius=state.radius, stats=stats)

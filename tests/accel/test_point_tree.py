@@ -93,7 +93,8 @@ def test_bad_arguments_raise(device):
 
 def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
     """The host learns each level's list sizes from one read (the chunk
-    counts stay on the device); add one for the VVH radius estimates."""
+    counts stay on the device); add one for the VVH radius estimates and
+    one for the node count (the node table has unused slots)."""
     reads = []
     for name in ("to_host", "get"):
         original = getattr(type(device), name)
@@ -102,7 +103,7 @@ def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
     tree = PointTree.build(device, points)
     levels = tree.stats["large_levels"] + tree.stats["small_levels"]
     assert tree.stats["large_levels"] >= 3
-    assert len(reads) <= levels + 1
+    assert len(reads) <= levels + 2
     check_knn(tree, points, RNG.random((50, 3)).astype(np.float32), 8)
 
 
