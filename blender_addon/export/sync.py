@@ -128,7 +128,7 @@ class SceneSync:
                 break
             if not inst.show_self:
                 continue  # an instancer hidden in renders (e.g. "Show Instancer: Render" off)
-            obj = inst.object
+            obj = _shown_object(inst)
             if obj.type == "LIGHT":
                 row = light_row(obj.data, inst.matrix_world, warnings)
                 if row is not None:
@@ -144,7 +144,7 @@ class SceneSync:
             if obj.name_full not in checked:
                 checked.add(obj.name_full)
                 _warn_object_settings(obj, warnings)
-            key = _instance_key(inst)
+            key = _instance_key(inst, obj)
             slot_rows = _slot_rows(obj, local.materials, table)
             tangents = table.tangents_of(slot_rows)
             if "UV" in tangents.values() and not local.tangents_asked:
@@ -248,12 +248,29 @@ class SceneSync:
         return scene, edits
 
 
-def _instance_key(inst) -> tuple:
-    """What names an instance from one sync to the next: its object, and for
-    an instance made by another object, that object and the instance's id."""
+def _shown_object(inst):
+    """The object an instance shows. An instance of another object (a
+    collection instance, an object instanced by geometry nodes) shows that
+    object, ``inst.instance_object``; read through ``inst.object`` instead,
+    bpy makes a Python object for the instance's temporary object that is
+    never freed (120 bytes per instance and export, bpy 5.0: the memory of a
+    viewport grew with every edit). Geometry made by geometry nodes is only
+    reachable through ``inst.object`` (its ``instance_object`` is the
+    instancer), which keeps that cost."""
     if inst.is_instance:
-        return (inst.object.name_full, inst.parent.name_full, tuple(inst.persistent_id))
-    return (inst.object.name_full,)
+        source = inst.instance_object
+        if source is not None and source != inst.parent:
+            return source
+    return inst.object
+
+
+def _instance_key(inst, obj) -> tuple:
+    """What names an instance from one sync to the next: the object it shows,
+    and for an instance made by another object, that object and the
+    instance's id."""
+    if inst.is_instance:
+        return (obj.name_full, inst.parent.name_full, tuple(inst.persistent_id))
+    return (obj.name_full,)
 
 
 def _concatenated(parts: list[_Instance]) -> tuple:

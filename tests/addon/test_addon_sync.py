@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from blender_addon.export import export_scene
-from blender_addon.export.sync import SceneSync, read_updates
+from blender_addon.export.sync import SceneSync, _shown_object, read_updates
 from blender_addon.viewport import COARSE_PHOTON_SHARE, Job, ViewportSession
 from gpu_core.renderer import Renderer
 from gpu_core.settings import RenderSettings
@@ -154,6 +154,34 @@ def test_a_sync_with_no_edit_changes_nothing_and_shares_every_table(room):
     again, changed = _synced(bpy, sync, edits.apply(lambda: None))
     assert changed == set()
     assert again.triangles is first.triangles and again.materials is first.materials and again.lights is first.lights
+
+
+class _Instance:
+    """A depsgraph object instance whose ``object`` must not be read."""
+
+    def __init__(self, is_instance, instance_object, parent):
+        self.is_instance, self.instance_object, self.parent = is_instance, instance_object, parent
+
+    @property
+    def object(self):
+        raise AssertionError("inst.object read")
+
+
+def test_an_instance_of_an_object_is_read_through_the_object_it_instances():
+    # bpy makes a Python object for an instance's temporary object that is
+    # never freed (the viewport's memory grew with every edit of a scene of
+    # collection instances): the sync reads the instanced object instead
+    source, holder = object(), object()
+    assert _shown_object(_Instance(True, source, holder)) is source
+
+
+def test_geometry_made_by_geometry_nodes_and_plain_objects_are_read_through_the_instance():
+    # geometry made in a node tree has no object of its own: instance_object is the instancer
+    holder = object()
+    with pytest.raises(AssertionError, match="inst.object read"):
+        _shown_object(_Instance(True, holder, holder))
+    with pytest.raises(AssertionError, match="inst.object read"):
+        _shown_object(_Instance(False, None, None))
 
 
 def test_a_material_edit_keeps_the_images_pixels(room):
