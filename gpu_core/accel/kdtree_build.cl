@@ -132,13 +132,15 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
                                    const __global float4 *el_hi,
                                    __global int *el_node,
                                    __global float4 *chunk_lo,
-                                   __global float4 *chunk_hi, const int chunks) {
+                                   __global float4 *chunk_hi, const __global int *chunk_total) {
+    /* launched over a bound: the chunk count (the scan's total) is read here */
 #if KD_CHUNK_LANES == 1
     int c = get_global_id(0), lid = 0, size = 1;
-    if (c >= chunks) return;
+    if (c >= chunk_total[0]) return;
 #else
     __local float4 lo_s[KD_CHUNK], hi_s[KD_CHUNK];
     int c = get_group_id(0), lid = get_local_id(0), size = get_local_size(0);
+    if (c >= chunk_total[0]) return; /* the whole group */
 #endif
     int begin, end;
     int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);

@@ -1,7 +1,8 @@
 """Breadth-first kd-tree build on the device [ZHWG08] (kdtree_build.cl).
 
 The host launches the kernels of one level at a time and reads back only
-counts (scan totals) to size the next level's arrays:
+the next level's counts (one scan total a level; the chunk kernel runs over
+a bound and reads its own count on the device):
 
 * large-node stage: chunk bounds (a work-item per chunk on a CPU, a
   work-group per chunk elsewhere), node bounds, empty-space cut or spatial
@@ -183,21 +184,23 @@ class _Build:
         dev, i32 = self.device, np.int32
         active, elements = self.active, self.elements
         total_i, total_l, total_8 = self.totals
-        # chunks of every active node, and each chunk's bounds
+        # chunks of every active node, and each chunk's bounds; their count
+        # stays on the device (total_i): the chunk kernel runs over a bound
         chunk_base = dev.array(active, np.int32)
         self.kernel("KdBuild_chunk_counts")(active, self.act_info.data, i32(active), chunk_base.data)
-        chunks = int(dev.scalar(primitives.scan(dev, chunk_base.data, active, total=total_i)))
-        chunk_node = dev.array(chunks, np.int32)
-        chunk_lo, chunk_hi = dev.array(chunks, cltypes.float4), dev.array(chunks, cltypes.float4)
+        primitives.scan(dev, chunk_base.data, active, total=total_i)
+        bound = active + elements // CHUNK
+        chunk_node = dev.array(bound, np.int32)
+        chunk_lo, chunk_hi = dev.array(bound, cltypes.float4), dev.array(bound, cltypes.float4)
         el_node = dev.array(elements, np.int32)
         self.kernel("KdBuild_chunk_nodes")(active, self.act_info.data, chunk_base.data, i32(active), chunk_node.data)
         bounds = self.kernel("KdBuild_chunk_bounds")
         bounds_args = (self.act_info.data, chunk_base.data, chunk_node.data, self.el_lo.data, self.el_hi.data,
-                       el_node.data, chunk_lo.data, chunk_hi.data, i32(chunks))
+                       el_node.data, chunk_lo.data, chunk_hi.data, total_i)
         if self.config.chunk_lanes == 1:
-            bounds(chunks, *bounds_args)
+            bounds(bound, *bounds_args)
         else:
-            bounds.groups(chunks, self.config.chunk_group, *bounds_args)
+            bounds.groups(bound, self.config.chunk_group, *bounds_args)
         # each node's plane, each element's sides and clipped boxes
         node_split, node_mode = dev.array(active, np.float32), dev.array(active, np.int32)
         self.kernel("KdBuild_large_split")(
