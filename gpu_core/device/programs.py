@@ -1,5 +1,6 @@
 """Kernel programs: sources with their includes inlined, built once per
-process, cached on disk across processes, built up front in parallel.
+process, cached on disk across processes, built up front in parallel
+(threads, or helper processes where the compiler takes one at a time).
 
 Every ``#include "dir/file.h"`` is relative to the include root, the
 ``gpu_core`` folder, and is inlined once; ``#line`` markers keep a build
@@ -12,8 +13,11 @@ built with the shared constants (device/constants.py) as ``-D`` defines.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import re
+import subprocess
+import sys
 import threading
 import time
 import warnings
@@ -61,6 +65,14 @@ _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 # moved hit distances past the tests' 1e-4; it costs the image kernel there
 # 5-30% (README, "On a GPU").
 _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
+# Platforms whose compiler builds one program at a time per process, threads
+# or not (PoCL: a first render's 8 s of builds on two cores took 8 s of CPU):
+# there the programs missing from the disk cache are shared with helper
+# processes (device/prebuild.py), at most _MAX_HELPERS, each given at most
+# _HELPER_WAIT seconds before its programs are compiled here instead.
+_SERIAL_COMPILER_PLATFORMS = ("Portable Computing Language",)
+_MAX_HELPERS = 3
+_HELPER_WAIT = 300.0
 
 
 def kernel_cache_dir() -> Path:
@@ -101,6 +113,18 @@ def load_source(name: str) -> str:
         return "".join(out)
 
     return expand(name)
+
+
+def _device_spec(device: cl.Device) -> str | None:
+    """``P:D``, the platform and device numbers get_device takes, of ``device``."""
+    try:
+        for p, platform in enumerate(cl.get_platforms()):
+            for d, other in enumerate(platform.get_devices()):
+                if other == device:
+                    return f"{p}:{d}"
+    except cl.Error:
+        pass
+    return None
 
 
 def build_options(defines: dict | None = None) -> tuple[str, ...]:
@@ -160,22 +184,81 @@ class Programs:
 
     def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None) -> None:
         """Build every (name, defines) in ``wanted`` that is not built yet, in
-        parallel threads; ``progress(compiled, to_compile)`` after each one
-        that is not in the disk cache (loading one reports nothing)."""
+        parallel threads, and a share of those missing from the disk cache in
+        helper processes where the compiler takes one at a time;
+        ``progress(compiled, to_compile)`` after each one that is not in the
+        disk cache (loading one reports nothing)."""
         todo = list(dict.fromkeys((name, tuple(sorted((d or {}).items()))) for name, d in wanted))
         todo = [(n, dict(d)) for n, d in todo if (n, build_options(dict(d))) not in self._programs]
         if not todo:
             return
         uncached = [not self._cache_entry(n, build_options(d))[2].is_file() for n, d in todo]
         compiled = 0
-        # one at a time where the compiler is not safe to run on two threads (Oclgrind's crashes)
-        workers = 1 if self._simulator else max(1, min(len(todo), os.cpu_count() or 1))
-        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gpugi-build") as pool:
-            for future, counted in zip([pool.submit(self.get, n, d) for n, d in todo], uncached):
-                future.result()
-                if counted and progress is not None:
-                    compiled += 1
-                    progress(compiled, sum(uncached))
+
+        def count() -> None:
+            nonlocal compiled
+            if progress is not None:
+                compiled += 1
+                progress(compiled, sum(uncached))
+
+        helpers, given = self._share([t for t, u in zip(todo, uncached) if u])
+        try:
+            mine = [(t, u) for t, u in zip(todo, uncached) if t not in given]
+            # one at a time where the compiler is not safe to run on two threads (Oclgrind's crashes)
+            workers = 1 if self._simulator else max(1, min(len(mine), os.cpu_count() or 1))
+            with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gpugi-build") as pool:
+                for future, (_, missing) in zip([pool.submit(self.get, n, d) for (n, d), _ in mine], mine):
+                    future.result()
+                    if missing:
+                        count()
+            self._await(helpers, given, count)
+        finally:
+            for process in helpers:
+                if process.poll() is None:
+                    process.kill()
+                process.wait()
+        for name, defines in given:
+            self.get(name, defines)  # from the disk cache, or compiled here where a helper failed
+
+    def _share(self, missing: list[tuple[str, dict]]) -> tuple[list[subprocess.Popen], list[tuple[str, dict]]]:
+        """Helper processes compiling a share of ``missing`` into the disk
+        cache, where the compiler builds one program at a time per process:
+        the processes, and the programs given to them (none elsewhere, or
+        when a process cannot start)."""
+        count = min(_MAX_HELPERS, (os.cpu_count() or 1) - 1, len(missing) - 1)
+        if self.device.platform.name.strip() not in _SERIAL_COMPILER_PLATFORMS or count < 1:
+            return [], []
+        spec = _device_spec(self.device)
+        if spec is None:
+            return [], []
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        processes, given = [], []
+        for helper in range(count):
+            share = missing[helper + 1::count + 1]  # this process keeps missing[0::count + 1]
+            try:
+                process = subprocess.Popen([sys.executable, "-m", "gpu_core.device.prebuild", spec], env=env,
+                                           stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                process.stdin.write(json.dumps(share).encode())
+                process.stdin.close()
+            except (OSError, ValueError):
+                continue  # no interpreter to start: this process compiles them
+            processes.append(process)
+            given += share
+        return processes, given
+
+    def _await(self, processes: list[subprocess.Popen], given: list[tuple[str, dict]], count: Callable[[], None]) -> None:
+        """Wait for the helpers, counting their programs as they reach the
+        disk cache, at most _HELPER_WAIT seconds."""
+        paths = {self._cache_entry(n, build_options(d))[2] for n, d in given}
+        deadline = time.monotonic() + _HELPER_WAIT
+        while paths:
+            done = {path for path in paths if path.is_file()}
+            for _ in done:
+                count()
+            paths -= done
+            if all(p.poll() is not None for p in processes) or time.monotonic() > deadline:
+                return
+            time.sleep(0.02)
 
     def _cache_entry(self, name: str, options: tuple[str, ...]) -> tuple[str, tuple[str, ...], Path]:
         """The source of ``name``, the options it is built with on this

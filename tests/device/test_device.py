@@ -199,6 +199,37 @@ def test_damaged_cache_file_is_rebuilt_and_replaced(tmp_path, damage):
     assert _run_probe(kernels, cache)["from_cache"] == [True]
 
 
+# programs of no scene features, each compiling in about a second
+_PROGRAMS = [("device/primitives.cl", {}), ("photons/photon_reweight.cl", {}), ("accel/point_tree_build.cl", {}),
+             ("gi/cache/grid.cl", {})]
+
+
+def _fresh_build(device, tmp_path, monkeypatch):
+    """build_all of _PROGRAMS into an empty disk cache, as if on four cores."""
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(programs_module.os, "cpu_count", lambda: 4)
+    programs = programs_module.Programs(device.context, device.device)
+    programs.build_all(_PROGRAMS)
+    assert len(list((tmp_path / "cache").glob("*.bin"))) == len(_PROGRAMS)
+    assert sorted(r.name for r in programs.builds) == sorted(name for name, _ in _PROGRAMS)
+    return {r.name for r in programs.builds if r.from_cache}
+
+
+def test_programs_missing_from_the_disk_cache_are_compiled_by_helper_processes_where_the_compiler_is_serial(
+        device, tmp_path, monkeypatch):
+    # this process keeps every fourth program; the helpers' programs are loaded from the disk cache
+    loaded = _fresh_build(device, tmp_path, monkeypatch)
+    serial = device.device.platform.name.strip() in programs_module._SERIAL_COMPILER_PLATFORMS
+    assert loaded == ({name for name, _ in _PROGRAMS[1:]} if serial else set())
+
+
+@pytest.mark.parametrize("interpreter", ["/bin/false", "/no/such/python"])
+def test_a_helper_that_fails_or_cannot_start_leaves_its_programs_to_this_process(device, tmp_path, monkeypatch,
+                                                                              interpreter):
+    monkeypatch.setattr(programs_module.sys, "executable", interpreter)
+    assert _fresh_build(device, tmp_path, monkeypatch) == set()
+
+
 # -- errors -------------------------------------------------------------------------
 
 
