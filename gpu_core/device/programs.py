@@ -231,7 +231,8 @@ class Programs:
         spec = _device_spec(self.device)
         if spec is None:
             return [], []
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        # this gpu_core first (an extension loads it from inside its own folder), then this process's path
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(INCLUDE_ROOT.parent), *(p for p in sys.path if p)]))
         processes, given = [], []
         for helper in range(count):
             share = missing[helper + 1::count + 1]  # this process keeps missing[0::count + 1]
