@@ -19,6 +19,7 @@ from typing import Callable
 
 import pyopencl as cl
 
+from . import warmup
 from .denoise import denoise
 from .device import Device
 from .device.timer import StageTimer
@@ -50,8 +51,13 @@ class RenderResult:
 class Renderer:
     """Renders gpu_core scenes on one OpenCL device."""
 
-    def __init__(self, device: Device):
+    def __init__(self, device: Device, builds_up_front: bool = True):
+        """``builds_up_front``: every program a render needs is built before
+        its first stage (while a helper process warms its kernels where
+        that helps: warmup.py); else each when a stage first needs it."""
         self.device = device
+        self._builds_up_front = builds_up_front
+        self._warmup = None  # the helper process of the render running, if any
         self._held = Held()
         self._buffers: SceneBuffers | None = None
         self._maps: PhotonMaps | None = None
@@ -78,6 +84,9 @@ class Renderer:
         except cl.Error as err:
             self._forget()
             raise DeviceError(device_failure(self.device.name, err)) from err
+        finally:
+            warmup.stop(self._warmup)
+            self._warmup = None
 
     def _forget(self) -> None:
         """Drop everything held on the device (after a device failure)."""
@@ -100,7 +109,9 @@ class Renderer:
         the_plan.check_budget(self.device)
         moved = self.device.transfers()
         with timer.stage("compile"):
-            _Builds(self.device, the_plan.programs).join(progress, should_stop)
+            if self._builds_up_front:
+                self._warmup = warmup.start(self.device, scene, settings, the_plan.programs)
+                _Builds(self.device, the_plan.programs, busy=int(self._warmup is not None)).join(progress, should_stop)
         check_stop(should_stop)
         self._upload(scene, the_plan, timer, should_stop)
         check_stop(should_stop)
@@ -263,17 +274,18 @@ class _Builds:
     render's own thread reports progress ("compiling kernels 3/9") and sees
     a request to stop; the builder's thread never calls back."""
 
-    def __init__(self, device: Device, programs: list):
+    def __init__(self, device: Device, programs: list, busy: int = 0):
         self._error: GpuGiError | None = None
         self._done, self._total = 0, 0
-        self._thread = threading.Thread(target=self._run, args=(device, programs), name="gpugi-builds", daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(device, programs, busy), name="gpugi-builds",
+                                        daemon=True)
         self._thread.start()
 
-    def _run(self, device: Device, programs: list) -> None:
+    def _run(self, device: Device, programs: list, busy: int) -> None:
         def count(done: int, total: int) -> None:
             self._done, self._total = done, total
         try:
-            device.programs.build_all(programs, count)
+            device.programs.build_all(programs, count, busy)
         except GpuGiError as err:
             self._error = err
 

@@ -115,7 +115,7 @@ def load_source(name: str) -> str:
     return expand(name)
 
 
-def _device_spec(device: cl.Device) -> str | None:
+def device_spec(device: cl.Device) -> str | None:
     """``P:D``, the platform and device numbers get_device takes, of ``device``."""
     try:
         for p, platform in enumerate(cl.get_platforms()):
@@ -125,6 +125,17 @@ def _device_spec(device: cl.Device) -> str | None:
     except cl.Error:
         pass
     return None
+
+
+def serial_compiler(device: cl.Device) -> bool:
+    """Whether ``device``'s compiler builds one program at a time per process."""
+    return device.platform.name.strip() in _SERIAL_COMPILER_PLATFORMS
+
+
+def helper_environment() -> dict:
+    """The environment of a helper process: this gpu_core first (an extension
+    loads it from inside its own folder), then this process's path."""
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(INCLUDE_ROOT.parent), *(p for p in sys.path if p)]))
 
 
 def build_options(defines: dict | None = None) -> tuple[str, ...]:
@@ -182,10 +193,17 @@ class Programs:
                 self._pending.pop(key).set()
         return program
 
-    def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None) -> None:
+    def missing(self, wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
+        """The (name, defines) of ``wanted`` neither built here nor in the disk cache."""
+        return [(n, d) for n, d in wanted if (n, build_options(d)) not in self._programs
+                and not self._cache_entry(n, build_options(d))[2].is_file()]
+
+    def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None,
+                  busy: int = 0) -> None:
         """Build every (name, defines) in ``wanted`` that is not built yet, in
         parallel threads, and a share of those missing from the disk cache in
-        helper processes where the compiler takes one at a time;
+        helper processes where the compiler takes one at a time (on the
+        cores not taken by this process and ``busy`` others);
         ``progress(compiled, to_compile)`` after each one that is not in the
         disk cache (loading one reports nothing)."""
         todo = list(dict.fromkeys((name, tuple(sorted((d or {}).items()))) for name, d in wanted))
@@ -201,7 +219,7 @@ class Programs:
                 compiled += 1
                 progress(compiled, sum(uncached))
 
-        helpers, given = self._share([t for t, u in zip(todo, uncached) if u])
+        helpers, given = self._share([t for t, u in zip(todo, uncached) if u], busy)
         try:
             mine = [(t, u) for t, u in zip(todo, uncached) if t not in given]
             # one at a time where the compiler is not safe to run on two threads (Oclgrind's crashes)
@@ -220,19 +238,19 @@ class Programs:
         for name, defines in given:
             self.get(name, defines)  # from the disk cache, or compiled here where a helper failed
 
-    def _share(self, missing: list[tuple[str, dict]]) -> tuple[list[subprocess.Popen], list[tuple[str, dict]]]:
+    def _share(self, missing: list[tuple[str, dict]], busy: int) -> tuple[list[subprocess.Popen], list[tuple[str, dict]]]:
         """Helper processes compiling a share of ``missing`` into the disk
-        cache, where the compiler builds one program at a time per process:
-        the processes, and the programs given to them (none elsewhere, or
-        when a process cannot start)."""
-        count = min(_MAX_HELPERS, (os.cpu_count() or 1) - 1, len(missing) - 1)
-        if self.device.platform.name.strip() not in _SERIAL_COMPILER_PLATFORMS or count < 1:
+        cache, where the compiler builds one program at a time per process,
+        on the cores left beside this process and ``busy`` others: the
+        processes, and the programs given to them (none elsewhere, or when a
+        process cannot start)."""
+        count = min(_MAX_HELPERS, (os.cpu_count() or 1) - 1 - busy, len(missing) - 1)
+        if not serial_compiler(self.device) or count < 1:
             return [], []
-        spec = _device_spec(self.device)
+        spec = device_spec(self.device)
         if spec is None:
             return [], []
-        # this gpu_core first (an extension loads it from inside its own folder), then this process's path
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(INCLUDE_ROOT.parent), *(p for p in sys.path if p)]))
+        env = helper_environment()
         processes, given = [], []
         for helper in range(count):
             share = missing[helper + 1::count + 1]  # this process keeps missing[0::count + 1]

@@ -1,0 +1,82 @@
+"""A first render's kernels compiled ahead, in a helper process.
+
+PoCL compiles each program, and each kernel's work-group function at its
+first launch, one at a time per process: a first render on two cores spent
+24 s compiling on one of them. When some program of a render is missing
+from the disk cache, ``start`` runs this module in a helper process on a
+small copy of the render (the same scene and settings, so the same programs
+and launch shapes, but a few pixels, photons and cache points), with each
+program built when a stage first needs it rather than all up front: while
+the render builds its programs, the helper compiles the first stages'
+work-group functions, and stays ahead, so the render finds them in PoCL's
+cache. The helper changes nothing the render computes; a helper that fails
+costs nothing but its core.
+
+    python -m gpu_core.warmup P:D < pickle of (scene, settings)
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+from dataclasses import replace
+
+from .device import Device
+from .device.programs import device_spec, helper_environment, serial_compiler
+from .scene.model import Scene
+from .settings import RenderSettings
+
+# the small copy: pixels on a side, and the counts that only size the work
+SIDE = 16
+SMALL = dict(samples=1, global_photons=2_000, caustic_photons=1_000, cache_seeds=20, gather_rays=16, denoise=False)
+
+
+def small_copy(scene: Scene, settings: RenderSettings) -> tuple[Scene, RenderSettings]:
+    """The render at SIDE x SIDE pixels with SMALL counts (programs and
+    launch shapes as the render's)."""
+    camera = replace(scene.camera, width=SIDE, height=SIDE, border=None)
+    return replace(scene, camera=camera), replace(settings, **SMALL)
+
+
+def start(device: Device, scene: Scene, settings: RenderSettings, programs: list) -> subprocess.Popen | None:
+    """The helper process warming the kernels of a render of ``scene`` with
+    ``settings`` (whose ``programs`` the plan lists), where it helps: a
+    compiler that takes one program at a time, a second core, and a program
+    missing from the disk cache; None otherwise or when it cannot start."""
+    if (not serial_compiler(device.device) or (os.cpu_count() or 1) < 2
+            or not device.programs.missing(programs)):
+        return None
+    spec = device_spec(device.device)
+    if spec is None:
+        return None
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "gpu_core.warmup", spec], env=helper_environment(),
+                                   stdin=subprocess.PIPE,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        process.stdin.write(pickle.dumps(small_copy(scene, settings)))
+        process.stdin.close()
+    except (OSError, ValueError, pickle.PicklingError):
+        return None
+    return process
+
+
+def stop(process: subprocess.Popen | None) -> None:
+    """End the helper (when the render is over, what it has not compiled is not needed)."""
+    if process is not None:
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+
+
+def main() -> None:
+    from .device import get_device
+    from .renderer import Renderer
+
+    scene, settings = pickle.load(sys.stdin.buffer)
+    Renderer(get_device(sys.argv[1]), builds_up_front=False).render(scene, settings)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""The helper process that compiles a first render's kernels ahead
+(gpu_core/warmup.py): when it starts, what it renders, and that the render
+it helps computes what it computes without it."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+from conftest import ROOT
+from test_threads import GI, scene
+
+from gpu_core import warmup
+from gpu_core.device import programs as programs_module
+from gpu_core.plan import plan
+from gpu_core.renderer import Renderer
+from gpu_core.scene.validate import validate
+
+
+def test_the_small_copy_needs_the_programs_of_the_render():
+    # the same programs (and defines): the kernels the helper compiles are the render's
+    full = validate(scene(True, 48))
+    small_scene, small_settings = warmup.small_copy(full, GI)
+    assert (small_scene.camera.width, small_scene.camera.height) == (warmup.SIDE, warmup.SIDE)
+    assert small_settings.global_photons < GI.global_photons and not small_settings.denoise
+    assert plan(validate(small_scene), small_settings).programs == plan(full, GI).programs
+
+
+class _Recorder:
+    """A stand-in for subprocess.Popen that records the command and input."""
+
+    started: list = []
+
+    def __init__(self, command, **kwargs):
+        self.command, self.stdin, self.killed = command, SimpleNamespace(write=self._write, close=lambda: None), False
+        self.data = b""
+        _Recorder.started.append(self)
+
+    def _write(self, data):
+        self.data += data
+
+    def poll(self):
+        return None
+
+    def kill(self):
+        self.killed = True
+
+    def wait(self):
+        return 0
+
+
+def test_a_helper_starts_only_where_the_compiler_is_serial_a_core_is_free_and_a_program_is_missing(
+        device, tmp_path, monkeypatch):
+    the_scene = validate(scene(True, 32))
+    programs = plan(the_scene, GI, None, None, device).programs
+    device.programs.build_all(programs)
+    monkeypatch.setattr(warmup.subprocess, "Popen", _Recorder)
+    monkeypatch.setattr(warmup.os, "cpu_count", lambda: 2)
+    _Recorder.started = []
+    assert warmup.start(device, the_scene, GI, programs) is None  # every program built already
+    # a disk cache without them: a helper, where the compiler takes one program at a time
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "empty"))
+    fresh = SimpleNamespace(device=device.device, programs=programs_module.Programs(device.context, device.device))
+    process = warmup.start(fresh, the_scene, GI, programs)
+    serial = programs_module.serial_compiler(device.device)
+    assert (process is not None) == serial
+    if serial:
+        assert process.command[1:3] == ["-m", "gpu_core.warmup"]
+        assert pickle.loads(process.data)[0].camera.width == warmup.SIDE
+        warmup.stop(process)
+        assert process.killed
+    monkeypatch.setattr(warmup.os, "cpu_count", lambda: 1)
+    assert warmup.start(fresh, the_scene, GI, programs) is None  # no core to spare
+
+
+def test_building_each_program_when_first_needed_renders_the_same_image(device):
+    the_scene = scene(True, 24)
+    lazily = Renderer(device, builds_up_front=False).render(the_scene, GI).passes["Combined"]
+    np.testing.assert_array_equal(lazily, Renderer(device).render(the_scene, GI).passes["Combined"])
+
+
+def test_the_helper_module_renders_a_pickled_small_copy(device):
+    small = warmup.small_copy(scene(True, 32), GI)
+    spec = programs_module.device_spec(device.device)
+    done = subprocess.run([sys.executable, "-m", "gpu_core.warmup", spec], input=pickle.dumps(small),
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True, timeout=600)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
