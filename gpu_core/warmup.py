@@ -24,7 +24,7 @@ import sys
 from dataclasses import replace
 
 from .device import Device
-from .device.programs import device_spec, helper_environment, serial_compiler
+from .device.programs import device_spec, helper_environment, compile_helpers
 from .scene.model import Scene
 from .settings import RenderSettings
 
@@ -45,7 +45,7 @@ def start(device: Device, scene: Scene, settings: RenderSettings, programs: list
     ``settings`` (whose ``programs`` the plan lists), where it helps: a
     compiler that takes one program at a time, a second core, and a program
     missing from the disk cache; None otherwise or when it cannot start."""
-    if (not serial_compiler(device.device) or (os.cpu_count() or 1) < 2
+    if (not compile_helpers(device.device) or (os.cpu_count() or 1) < 2
             or not device.programs.missing(programs)):
         return None
     spec = device_spec(device.device)

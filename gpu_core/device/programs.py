@@ -127,9 +127,12 @@ def device_spec(device: cl.Device) -> str | None:
     return None
 
 
-def serial_compiler(device: cl.Device) -> bool:
-    """Whether ``device``'s compiler builds one program at a time per process."""
-    return device.platform.name.strip() in _SERIAL_COMPILER_PLATFORMS
+def compile_helpers(device: cl.Device) -> bool:
+    """Whether helper processes share the compiling for ``device``: where its
+    compiler builds one program at a time per process, unless
+    ``GPUGI_COMPILE_HELPERS=0`` (e.g. a farm job held to its cores)."""
+    return (device.platform.name.strip() in _SERIAL_COMPILER_PLATFORMS
+            and os.environ.get("GPUGI_COMPILE_HELPERS", "1") != "0")
 
 
 def helper_environment() -> dict:
@@ -245,7 +248,7 @@ class Programs:
         processes, and the programs given to them (none elsewhere, or when a
         process cannot start)."""
         count = min(_MAX_HELPERS, (os.cpu_count() or 1) - 1 - busy, len(missing) - 1)
-        if not serial_compiler(self.device) or count < 1:
+        if not compile_helpers(self.device) or count < 1:
             return [], []
         spec = device_spec(self.device)
         if spec is None:

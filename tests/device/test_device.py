@@ -219,8 +219,14 @@ def test_programs_missing_from_the_disk_cache_are_compiled_by_helper_processes_w
         device, tmp_path, monkeypatch):
     # this process keeps every fourth program; the helpers' programs are loaded from the disk cache
     loaded = _fresh_build(device, tmp_path, monkeypatch)
-    serial = device.device.platform.name.strip() in programs_module._SERIAL_COMPILER_PLATFORMS
+    serial = programs_module.compile_helpers(device.device)
     assert loaded == ({name for name, _ in _PROGRAMS[1:]} if serial else set())
+
+
+def test_compile_helpers_are_off_when_the_environment_says_so(device, tmp_path, monkeypatch):
+    monkeypatch.setenv("GPUGI_COMPILE_HELPERS", "0")
+    assert not programs_module.compile_helpers(device.device)
+    assert _fresh_build(device, tmp_path, monkeypatch) == set()
 
 
 @pytest.mark.parametrize("interpreter", ["/bin/false", "/no/such/python"])

@@ -66,7 +66,7 @@ def test_a_helper_starts_only_where_the_compiler_is_serial_a_core_is_free_and_a_
     monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "empty"))
     fresh = SimpleNamespace(device=device.device, programs=programs_module.Programs(device.context, device.device))
     process = warmup.start(fresh, the_scene, GI, programs)
-    serial = programs_module.serial_compiler(device.device)
+    serial = programs_module.compile_helpers(device.device)
     assert (process is not None) == serial
     if serial:
         assert process.command[1:3] == ["-m", "gpu_core.warmup"]
