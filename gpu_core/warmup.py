@@ -24,7 +24,7 @@ import sys
 from dataclasses import replace
 
 from .device import Device
-from .device.programs import device_spec, helper_environment, compile_helpers
+from .device.programs import compile_helpers, device_spec, helper_environment
 from .scene.model import Scene
 from .settings import RenderSettings
 
