@@ -24,7 +24,7 @@ import sys
 from dataclasses import replace
 
 from .device import Device
-from .device.programs import compile_helpers, device_spec, helper_environment
+from .device.programs import compile_helpers, device_spec, start_helper
 from .scene.model import Scene
 from .settings import RenderSettings
 
@@ -52,14 +52,10 @@ def start(device: Device, scene: Scene, settings: RenderSettings, programs: list
     if spec is None:
         return None
     try:
-        process = subprocess.Popen([sys.executable, "-m", "gpu_core.warmup", spec], env=helper_environment(),
-                                   stdin=subprocess.PIPE,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        process.stdin.write(pickle.dumps(small_copy(scene, settings)))
-        process.stdin.close()
-    except (OSError, ValueError, pickle.PicklingError):
+        data = pickle.dumps(small_copy(scene, settings))
+    except (pickle.PicklingError, TypeError, AttributeError):
         return None
-    return process
+    return start_helper("gpu_core.warmup", spec, data)
 
 
 def stop(process: subprocess.Popen | None) -> None:

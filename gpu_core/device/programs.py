@@ -67,9 +67,11 @@ _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 # Platforms whose compiler builds one program at a time per process, threads
 # or not (PoCL: a first render's 8 s of builds on two cores took 8 s of CPU):
-# there the programs missing from the disk cache are shared with helper
-# processes (device/prebuild.py), at most _MAX_HELPERS, each given at most
-# _HELPER_WAIT seconds before its programs are compiled here instead.
+# there a render's kernels are compiled ahead in a helper process
+# (warmup.py), and the programs missing from the disk cache shared with
+# helper processes on the cores left (device/prebuild.py), at most
+# _MAX_HELPERS, each given at most _HELPER_WAIT seconds before its programs
+# are compiled here instead.
 _SERIAL_COMPILER_PLATFORMS = ("Portable Computing Language",)
 _MAX_HELPERS = 3
 _HELPER_WAIT = 300.0
@@ -135,10 +137,25 @@ def compile_helpers(device: cl.Device) -> bool:
             and os.environ.get("GPUGI_COMPILE_HELPERS", "1") != "0")
 
 
-def helper_environment() -> dict:
-    """The environment of a helper process: this gpu_core first (an extension
-    loads it from inside its own folder), then this process's path."""
-    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(INCLUDE_ROOT.parent), *(p for p in sys.path if p)]))
+def start_helper(module: str, spec: str, data: bytes) -> subprocess.Popen | None:
+    """``python -m module spec`` with ``data`` on its standard input, in
+    this process's interpreter, finding this gpu_core first (an extension
+    loads it from inside its own folder), then this process's path; None
+    when it cannot start."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(INCLUDE_ROOT.parent), *(p for p in sys.path if p)]))
+    try:
+        process = subprocess.Popen([sys.executable, "-m", module, spec], env=env, stdin=subprocess.PIPE,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except (OSError, ValueError):
+        return None
+    try:
+        process.stdin.write(data)
+        process.stdin.close()
+    except OSError:  # it ended at once
+        process.kill()
+        process.wait()
+        return None
+    return process
 
 
 def build_options(defines: dict | None = None) -> tuple[str, ...]:
@@ -253,19 +270,13 @@ class Programs:
         spec = device_spec(self.device)
         if spec is None:
             return [], []
-        env = helper_environment()
         processes, given = [], []
         for helper in range(count):
             share = missing[helper + 1::count + 1]  # this process keeps missing[0::count + 1]
-            try:
-                process = subprocess.Popen([sys.executable, "-m", "gpu_core.device.prebuild", spec], env=env,
-                                           stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                process.stdin.write(json.dumps(share).encode())
-                process.stdin.close()
-            except (OSError, ValueError):
-                continue  # no interpreter to start: this process compiles them
-            processes.append(process)
-            given += share
+            process = start_helper("gpu_core.device.prebuild", spec, json.dumps(share).encode())
+            if process is not None:  # else this process compiles them
+                processes.append(process)
+                given += share
         return processes, given
 
     def _await(self, processes: list[subprocess.Popen], given: list[tuple[str, dict]], count: Callable[[], None]) -> None:
