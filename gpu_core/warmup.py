@@ -5,11 +5,10 @@ first launch, one at a time per process: a first render on two cores spent
 24 s compiling on one of them. When some program of a render is missing
 from the disk cache, ``start`` runs this module in a helper process on a
 small copy of the render (the same scene and settings, so the same programs
-and launch shapes, but a few pixels, photons and cache points), with each
-program built when a stage first needs it rather than all up front: while
-the render builds its programs, the helper compiles the first stages'
-work-group functions, and stays ahead, so the render finds them in PoCL's
-cache. The helper changes nothing the render computes; a helper that fails
+and launch shapes, but a few pixels, photons and cache points), taking each
+program from the disk cache as the render compiles it: while the render
+builds its programs, the helper compiles the first stages' work-group
+functions, and stays ahead, so the render finds them in PoCL's cache. The helper changes nothing the render computes; a helper that fails
 costs nothing but its core.
 
     python -m gpu_core.warmup P:D < pickle of (scene, settings)
@@ -31,6 +30,7 @@ from .settings import RenderSettings
 # the small copy: pixels on a side, and the counts that only size the work
 SIDE = 16
 SMALL = dict(samples=1, global_photons=2_000, caustic_photons=1_000, cache_seeds=20, gather_rays=16, denoise=False)
+PROGRAM_WAIT = 300.0  # seconds the helper waits for a program the render compiles
 
 
 def small_copy(scene: Scene, settings: RenderSettings) -> tuple[Scene, RenderSettings]:
@@ -71,7 +71,13 @@ def main() -> None:
     from .renderer import Renderer
 
     scene, settings = pickle.load(sys.stdin.buffer)
-    Renderer(get_device(sys.argv[1]), builds_up_front=False).render(scene, settings)
+    device = get_device(sys.argv[1])
+    # PoCL keys a work-group function by its program, and two compiles of one
+    # source are two programs: the helper links the render's own compiled
+    # objects, as they reach the disk cache, so that its work-group functions
+    # are the render's (and a later process's, which links the same objects)
+    device.programs.wait_for_cache(PROGRAM_WAIT)
+    Renderer(device, builds_up_front=False).render(scene, settings)
 
 
 if __name__ == "__main__":

@@ -184,6 +184,7 @@ class Programs:
         self._exact_division = bool(device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
         self._simulator = any(name in device.platform.name.lower() for name in _SIMULATOR_PLATFORMS)
         self.builds: list[BuildRecord] = []
+        self._wait = 0.0  # seconds to wait for a program to reach the disk cache instead of compiling it
         self._programs: dict[tuple, cl.Program] = {}
         self._pending: dict[tuple, threading.Event] = {}
         self._lock = threading.Lock()
@@ -213,6 +214,12 @@ class Programs:
                 self._pending.pop(key).set()
         return program
 
+    def wait_for_cache(self, seconds: float) -> None:
+        """From now on take every program from the disk cache, waiting up to
+        ``seconds`` for another process to store it, and compile none (a
+        DeviceError when it does not come)."""
+        self._wait = float(seconds)
+
     def missing(self, wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
         """The (name, defines) of ``wanted`` neither built here nor in the disk cache."""
         return [(n, d) for n, d in wanted if (n, build_options(d)) not in self._programs
@@ -230,24 +237,24 @@ class Programs:
         todo = [(n, dict(d)) for n, d in todo if (n, build_options(dict(d))) not in self._programs]
         if not todo:
             return
-        uncached = [not self._cache_entry(n, build_options(d))[2].is_file() for n, d in todo]
+        missing = self.missing(todo)
         compiled = 0
 
         def count() -> None:
             nonlocal compiled
             if progress is not None:
                 compiled += 1
-                progress(compiled, sum(uncached))
+                progress(compiled, len(missing))
 
-        helpers, given = self._share([t for t, u in zip(todo, uncached) if u], busy)
+        helpers, given = self._share(missing, busy)
         try:
-            mine = [(t, u) for t, u in zip(todo, uncached) if t not in given]
+            mine = [(t, t in missing) for t in todo if t not in given]
             # one at a time where the compiler is not safe to run on two threads (Oclgrind's crashes)
             workers = 1 if self._simulator else max(1, min(len(mine), os.cpu_count() or 1))
             with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gpugi-build") as pool:
-                for future, (_, missing) in zip([pool.submit(self.get, n, d) for (n, d), _ in mine], mine):
+                for future, (_, absent) in zip([pool.submit(self.get, n, d) for (n, d), _ in mine], mine):
                     future.result()
-                    if missing:
+                    if absent:
                         count()
             self._await(helpers, given, count)
         finally:
@@ -313,6 +320,12 @@ class Programs:
         start = time.perf_counter()
         source, options, path = self._cache_entry(name, options)
         program = None if self._simulator else self._load_cached(path, options)
+        deadline = time.monotonic() + self._wait
+        while program is None and self._wait and time.monotonic() < deadline:
+            time.sleep(0.05)
+            program = self._load_cached(path, options)
+        if program is None and self._wait:
+            raise DeviceError(f"program {name!r} did not reach the disk cache in {self._wait:g} s")
         from_cache = program is not None
         if program is None:
             program, cached = self._compile(name, source, options)

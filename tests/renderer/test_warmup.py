@@ -11,11 +11,13 @@ import sys
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from conftest import ROOT
 from test_threads import GI, scene
 
 from gpu_core import warmup
 from gpu_core.device import programs as programs_module
+from gpu_core.errors import DeviceError
 from gpu_core.plan import plan
 from gpu_core.renderer import Renderer
 from gpu_core.scene.validate import validate
@@ -77,6 +79,14 @@ def test_a_helper_starts_only_where_the_compiler_is_serial_a_core_is_free_and_a_
     assert warmup.start(fresh, the_scene, GI, programs) is None  # no core to spare
 
 
+def test_a_program_that_never_reaches_the_disk_cache_is_an_error_when_waiting_for_it(device, tmp_path, monkeypatch):
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "empty"))
+    waiting = programs_module.Programs(device.context, device.device)
+    waiting.wait_for_cache(0.2)
+    with pytest.raises(DeviceError, match="did not reach the disk cache"):
+        waiting.get("device/primitives.cl")
+
+
 def test_building_each_program_when_first_needed_renders_the_same_image(device):
     the_scene = scene(True, 24)
     lazily = Renderer(device, builds_up_front=False).render(the_scene, GI).passes["Combined"]
@@ -85,6 +95,7 @@ def test_building_each_program_when_first_needed_renders_the_same_image(device):
 
 def test_the_helper_module_renders_a_pickled_small_copy(device):
     small = warmup.small_copy(scene(True, 32), GI)
+    device.programs.build_all(plan(validate(small[0]), small[1], None, None, device).programs)  # it takes them from the disk cache
     spec = programs_module.device_spec(device.device)
     done = subprocess.run([sys.executable, "-m", "gpu_core.warmup", spec], input=pickle.dumps(small),
                           env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True, timeout=600)
