@@ -176,7 +176,11 @@ inline float Microfacet_reflect_eval_aniso(float ax, float ay, float3 wo, float3
 
 /* Refraction through the microfacets (eta = n_t / n_i, wi.z < 0): f |cos_i|
  * (Fresnel left out), its pdf by the visible normals, and the microfacet
- * normal in *h (facing wo). False where no refraction joins wo and wi. */
+ * normal in *h (h.z >= 0). As Cycles evaluates it: every term takes the
+ * cosines to h by their absolute values, so a pair of directions whose
+ * half vector faces away from one of them (a refraction no microfacet
+ * makes, which sampling never produces) still gets a value and a pdf.
+ * False where the half vector is undefined. */
 inline bool Microfacet_refract_eval(float alpha2, float eta, float3 wo, float3 wi, float *value, float *pdf,
                                     float3 *h_out) {
     float3 h = -(eta * wi + wo);
@@ -185,7 +189,6 @@ inline bool Microfacet_refract_eval(float alpha2, float eta, float3 wo, float3 w
     h /= len;
     if (h.z < 0.0f) h = -h;
     float c_o = dot(h, wo), c_i = dot(h, wi);
-    if (!(c_o > 0.0f && c_i < 0.0f)) return false;
     float d = Microfacet_D(alpha2, h.z);
     float lo = Microfacet_lambda(alpha2, wo.z), li = Microfacet_lambda(alpha2, wi.z);
     float common = d / wo.z * (eta * eta * fabs(c_o * c_i)) / (len * len);

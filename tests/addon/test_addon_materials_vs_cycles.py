@@ -231,16 +231,21 @@ def compare(bpy, tmp_path, material, lighting, boost: int = 1) -> tuple[np.ndarr
 # at NOISE_BOOST times the samples.
 NOISE_LIMITED = {("metal_r0.05", "point"), ("plastic_r0.05", "point")}
 NOISE_BOOST = 16
-# Known gaps (README, Looks and units), measured: rough glass under the
-# point light is 2-5% darker than Cycles at any sample count. Cycles
-# evaluates refraction through microfacets that face away from one of the
-# two directions (its microfacet eval has no such check; pbrt-v3 added the
-# one that GPU GI keeps, its issue #228), which adds light that its own
-# sampling never produces; GPU GI with the check removed came within 0-1.5%
-# of Cycles (rough white glass, IOR 1.5) and from 0.18 to 1.08 at IOR 1.05.
-KNOWN_GAPS = {("glass_r0.1", "point"), ("glass_r0.5", "point"), ("glass_node", "point")}
-CASES = [pytest.param(material, lighting, marks=pytest.mark.xfail(strict=True, reason="known gap"))
-         if (material, lighting) in KNOWN_GAPS else (material, lighting)
+# Beyond the test's samples (README, Looks and units), measured: rough
+# glass under the small point light is a few bright pixels (the light's
+# highlight and its paths through the sphere, on a black image) that Cycles
+# finds by chance. At 16 times its samples two Cycles renders with seeds 0
+# and 1 differ in their means by 3% (roughness 0.1) and by a relative
+# display RMSE of 0.7-1.2, twelve to twenty times the tolerance. GPU GI at
+# 32 times its samples against Cycles at 32 times: 0.986-0.990 (roughness
+# 0.1) and 1.001-1.005 (Glass node) of its means; roughness 0.5 at 8 times
+# both 1.004-1.024. Cycles' evaluation of refraction through microfacets
+# that face away (the cosines to the half vector by their absolute
+# values), which GPU GI follows, moved roughness 0.5 from 0.96 there.
+UNSETTLED = {("glass_r0.1", "point"), ("glass_r0.5", "point"), ("glass_node", "point")}
+UNSETTLED_MARK = pytest.mark.xfail(strict=True, reason="Cycles' own noise is above the tolerance")
+CASES = [pytest.param(material, lighting, marks=UNSETTLED_MARK)
+         if (material, lighting) in UNSETTLED else (material, lighting)
          for material in MATERIALS for lighting in ("point", "world")]
 
 

@@ -68,15 +68,51 @@ def evaluate(device, row, wo, wi, entering=True, ns=UP, parts=False):
 THETA_BINS, PHI_BINS, SUB = 24, 24, 24
 
 
+def glossy_normal(wo, n) -> np.ndarray:
+    """The glossy lobes' normal over the geometric normal +z for the view wo
+    and shading normal n: bsdf.h's Bsdf_glossy_normal (Cycles'
+    ensure_valid_specular_reflection), in numpy."""
+    wo, n, z = np.asarray(wo[:3], np.float64), np.asarray(n[:3], np.float64), np.array([0.0, 0.0, 1.0])
+    iz = wo[2]
+    threshold = min(0.9 * iz, 0.01)
+    if (2 * (n @ wo) * n - wo)[2] >= threshold:
+        return n
+    x = n - n[2] * z
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-7 else n
+    ix = wo @ x
+    a = ix * ix + iz * iz
+    b, c = 2 * (a + iz * threshold), (threshold + iz) ** 2
+    root = np.sqrt(max(b * b - 4 * a * c, 0.0))
+    nz2 = np.clip(0.25 * (b + root if ix < 0 else b - root) / a, 0.0, 1.0)
+    g = np.sqrt(1 - nz2) * x + np.sqrt(nz2) * z
+    return g / np.linalg.norm(g)
+
+
+def refracted_by_a_microfacet(row, wo, wi, entering=True, ns=UP) -> np.ndarray:
+    """For each wi, whether a microfacet could have scattered wo there: any
+    direction above the surface, and below it those whose half vector of
+    refraction (turned to the glossy lobes' side) faces wo and not wi.
+    Cycles' evaluation, and GPU GI's with it, gives the other directions
+    below a value and a pdf too (the cosines to the half vector by their
+    absolute values), though sampling never goes there."""
+    ior = float(row["ior"][0])
+    eta = ior if entering else 1.0 / ior
+    h = -(eta * wi + wo[:3])
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    h *= np.where(h @ glossy_normal(wo, ns) < 0, -1.0, 1.0)[:, None]
+    return (wi[:, 2] >= 0) | ((h @ wo[:3] > 0) & ((h * wi).sum(axis=1) < 0))
+
+
 def binned_pdf(device, row, wo, entering=True, ns=UP) -> np.ndarray:
-    """The pdf integrated over each (cos theta, phi) bin, by the midpoint
-    rule on SUB x SUB points a bin."""
+    """The pdf of the directions sampling can reach, integrated over each
+    (cos theta, phi) bin by the midpoint rule on SUB x SUB points a bin."""
     fine_c = (np.arange(THETA_BINS * SUB) + 0.5) / (THETA_BINS * SUB) * 2 - 1
     fine_p = (np.arange(PHI_BINS * SUB) + 0.5) / (PHI_BINS * SUB) * 2 * np.pi
     c, p = np.meshgrid(fine_c, fine_p, indexing="ij")
     s = np.sqrt(1 - c**2)
     wi = np.stack([s * np.cos(p), s * np.sin(p), c], -1).reshape(-1, 3)
     _, pdf = evaluate(device, row, wo, wi, entering, ns)
+    pdf = np.where(refracted_by_a_microfacet(row, wo, wi, entering, ns), pdf, 0.0)
     cell = (2.0 / (THETA_BINS * SUB)) * (2 * np.pi / (PHI_BINS * SUB))  # d(cos) d(phi) = solid angle
     return (pdf.reshape(THETA_BINS, SUB, PHI_BINS, SUB) * cell).sum(axis=(1, 3))
 
