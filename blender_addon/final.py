@@ -6,6 +6,7 @@ polled between them), then write the passes into Blender's render result.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from typing import Callable
@@ -128,10 +129,14 @@ def job_started(*_args) -> None:
 
 
 def job_ended(*_args) -> None:
-    """Blender's render_complete or render_cancel: the job's renderers are dropped."""
+    """Blender's render_complete or render_cancel: the job's renderers are
+    dropped and the device memory no renderer holds goes back to the driver."""
     global _JOB
     with _HELD_LOCK:
         _JOB = None
+    devices = sys.modules.get("gpu_core.device")
+    if devices is not None:  # else no device was ever opened (and pyopencl may be missing)
+        devices.free_held_memory()
 
 
 def release_held() -> None:

@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
+from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from .kernels import Kernel
 from .programs import Programs
@@ -45,6 +46,8 @@ class Device:
     _memo: dict = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _moved: threading.local = field(default_factory=threading.local)
+    _pool: MemoryPool | None = None
+    _pool_lock: threading.Lock = field(default_factory=threading.Lock)
 
     def __post_init__(self):
         self.programs = Programs(self.context, self.device)
@@ -81,9 +84,8 @@ class Device:
     def kernel(self, program: str, name: str, defines: dict | None = None) -> Kernel:
         """Kernel ``name`` of ``program`` built with ``defines``: one object per
         device, made on first use."""
-        key = (program, tuple(sorted((defines or {}).items())), name)
-        with self._lock:
-            found = self._kernels.get(key)
+        key = (program, name) if not defines else (program, tuple(sorted(defines.items())), name)
+        found = self._kernels.get(key)  # a dict read needs no lock; making one does
         if found is None:
             made = Kernel(self.queue, cl.Kernel(self.program(program, defines), name), self.device)
             with self._lock:
@@ -103,8 +105,23 @@ class Device:
     # -- memory -----------------------------------------------------------------
 
     def empty(self, nbytes: int) -> cl.Buffer:
-        """An uninitialised read-write buffer of at least 16 bytes."""
-        return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, size=max(int(nbytes), 16))
+        """An uninitialised read-write buffer of at least 16 bytes, from the
+        device's pool (pyopencl's MemoryPool): a buffer a render let go is
+        handed to the next one that fits instead of a new allocation (on
+        PoCL a new buffer waits for the kernels running; a frame makes
+        ~1,800). Safe on the one in-order queue: work queued on the old
+        owner runs first. Where the driver is out of memory the pool gives
+        its unused buffers back and tries again."""
+        with self._pool_lock:
+            if self._pool is None:
+                self._pool = MemoryPool(ImmediateAllocator(self.queue))
+            return self._pool.allocate(max(int(nbytes), 16))
+
+    def free_held(self) -> None:
+        """Give the pool's unused buffers back to the driver."""
+        with self._pool_lock:
+            if self._pool is not None:
+                self._pool.free_held()
 
     def zeros(self, nbytes: int) -> cl.Buffer:
         """A buffer of ``nbytes`` zero bytes (at least 16)."""

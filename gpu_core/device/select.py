@@ -116,6 +116,14 @@ _DEVICES: dict[str, Device] = {}
 _DEVICES_LOCK = threading.Lock()
 
 
+def free_held_memory() -> None:
+    """Give the unused pooled buffers of every device opened so far back to its driver."""
+    with _DEVICES_LOCK:
+        devices = list(_DEVICES.values())
+    for device in devices:
+        device.free_held()
+
+
 def get_device(spec: str | None = None) -> Device:
     """The device for ``spec`` (or ``GPUGI_DEVICE``), created once per process."""
     if spec is None:

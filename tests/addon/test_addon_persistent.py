@@ -9,6 +9,7 @@ from conftest import ROOT, render_to_array
 
 from blender_addon import final
 from blender_addon.final import LAST_RUN
+from gpu_core.device import select
 
 
 def _box_torus(bpy, persistent: bool):
@@ -82,4 +83,6 @@ def test_an_animation_keeps_its_renderer_across_frames_without_persistent_data(b
     assert {"kdtree", "global_photons"} <= set(plans[0])
     assert {"kdtree_reused", "global_photons_reused"} <= set(plans[1])  # only the camera moved
     assert final._JOB is None and not final._HELD  # the job's renderer is given back when it ends
+    pools = [device._pool for device in select._DEVICES.values() if device._pool is not None]
+    assert pools and all(pool.held_blocks == 0 for pool in pools)  # and the memory it let go
     assert sorted(os.listdir(tmp_path)) == ["frame_0001.exr", "frame_0002.exr"]

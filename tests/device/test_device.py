@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pyopencl as cl
 import pytest
 from conftest import ROOT
@@ -53,6 +54,7 @@ def _kernel_dir(path, expression="2.0f * (float)i + 1.0f", kernel=_KERNEL):
 # a process that builds probe.cl from argv[1] whole, the way any other program would
 _FULL_BUILD = """
 import sys, pathlib
+import numpy as np
 import pyopencl as cl
 import gpu_core.device.programs as programs_module
 from gpu_core.device import get_device
@@ -268,3 +270,25 @@ def test_load_source_inlines_each_included_header_once(tmp_path, monkeypatch):
     probe = load_source("probe.cl")
     assert "#include" not in probe and "inline float Probe_value" in probe and "Probe_fill" in probe
     assert load_source("twice.cl").count("inline float Probe_value") == 1
+
+
+def test_a_released_buffer_is_handed_to_the_next_allocation_of_its_size(device):
+    first = device.empty(1000)
+    address = first.int_ptr
+    del first
+    again = device.empty(1000)
+    assert again.int_ptr == address
+    other = device.empty(1000)  # while ``again`` is held, a buffer of its own
+    assert other.int_ptr != address
+
+
+def test_freeing_held_memory_gives_unused_buffers_back(device):
+    kept = device.empty(1 << 20)
+    dropped = device.empty(1 << 20)
+    del dropped
+    device.free_held()
+    assert device._pool.held_blocks == 0
+    assert device._pool.active_blocks >= 1  # the buffer still in use stays
+    data = np.arange(1 << 18, dtype=np.int32)
+    device.write(kept, data)
+    assert (device.read(kept, data.shape, np.int32) == data).all()
