@@ -399,7 +399,7 @@ def texture_channel(pixels: np.ndarray, channel: int) -> np.ndarray:
 PARTS = ("geometry", "materials", "lights", "world", "camera")
 
 
-def part_digests(scene: Scene, parts=PARTS) -> dict[str, bytes]:
+def part_digests(scene: Scene, parts=PARTS) -> dict[str, "PartDigest"]:
     """A digest of each of ``parts``: renders whose parts have the same
     digests can share what was built from those parts (kd-tree, tables,
     photon maps, the GI cache)."""
@@ -407,7 +407,7 @@ def part_digests(scene: Scene, parts=PARTS) -> dict[str, bytes]:
     arrays = {
         "geometry": lambda: [scene.triangles, scene.normals, scene.uvs, scene.material_ids, scene.tangents],
         "materials": lambda: ([getattr(m, f.name) for f in fields(Materials) if f.name != "names"] + list(scene.textures)
-                              + [np.asarray(scene.texture_closest, bool)]),
+                              + [scene.texture_closest]),
         "lights": lambda: [getattr(lights, f.name) for f in fields(Lights) if f.name != "names"],
         "world": lambda: [scene.world_color],
         "camera": lambda: [np.asarray(camera.matrix), np.asarray(camera.window),
@@ -415,13 +415,37 @@ def part_digests(scene: Scene, parts=PARTS) -> dict[str, bytes]:
                                      *(camera.border or (-1, -1, -1, -1)), camera.filter_kind, camera.filter_width],
                                     np.float64)],
     }
-    return {part: _digest(arrays[part]()) for part in parts}
+    return {part: PartDigest(arrays[part]()) for part in parts}
 
 
-def _digest(arrays) -> bytes:
-    digest = hashlib.blake2b(digest_size=16)
-    for array in arrays:
-        a = np.ascontiguousarray(array)
-        digest.update(str((a.dtype, a.shape)).encode())
-        digest.update(a.tobytes())
-    return digest.digest()
+class PartDigest:
+    """The digest of a part's arrays, hashed only when a comparison needs
+    it: a renderer's first render has nothing to compare with (an F12
+    render's fresh renderer never hashes; the large scene's geometry took
+    ~40 ms), and a part whose arrays are the very objects of the last
+    render's is the same without hashing (callers put new arrays in a scene
+    for what changed and never write into one already rendered)."""
+
+    def __init__(self, arrays: list):
+        self._arrays = arrays
+        self._value: bytes | None = None
+
+    @property
+    def value(self) -> bytes:
+        if self._value is None:
+            digest = hashlib.blake2b(digest_size=16)
+            for array in self._arrays:
+                a = np.ascontiguousarray(array)
+                digest.update(str((a.dtype, a.shape)).encode())
+                digest.update(a.tobytes())
+            self._value = digest.digest()
+        return self._value
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, PartDigest):
+            return NotImplemented
+        if len(self._arrays) == len(other._arrays) and all(a is b for a, b in zip(self._arrays, other._arrays)):
+            return True
+        return self.value == other.value
+
+    __hash__ = None

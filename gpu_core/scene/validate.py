@@ -124,7 +124,7 @@ def _checked_geometry(scene: Scene) -> tuple:
     counted = ValidationReport()
     tris, normals, uvs, mat_ids, tangents, cross = _valid_triangles(scene, counted)
     materials, mat_ids = _valid_material_ids(scene.materials, mat_ids, counted)
-    normals = _repaired_normals(normals, cross, counted).astype(np.float32)
+    normals = _repaired_normals(normals, cross, counted).astype(np.float32, copy=False)
     uvs = np.where(np.isfinite(uvs), uvs, 0.0).astype(np.float32)
     # a corner tangent that is not finite is no tangent (the triangle's UVs give one)
     tangents = np.where(np.isfinite(tangents).all(axis=-1, keepdims=True), tangents, 0.0).astype(np.float32)
@@ -144,7 +144,8 @@ def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
     given = scene.tangents
     tangents = (np.zeros((0, 3, 4), np.float32) if given is None or np.size(given) == 0
                 else _shaped(given, (n, 3, 4), np.float32))
-    finite = np.isfinite(tris).reshape(n, 9).all(axis=1)
+    # per triangle only where some coordinate is not finite (numpy reduces short rows slowly)
+    finite = np.isfinite(tris).reshape(n, 9).all(axis=1) if not np.isfinite(tris).all() else np.ones(n, bool)
     report.dropped_nonfinite_triangles = int((~finite).sum())
     # column by column (numpy reduces short rows slowly): the cross product
     # of two edges, the longest edge and the largest coordinate
@@ -156,13 +157,15 @@ def _valid_triangles(scene: Scene, report: ValidationReport) -> tuple:
             cross[:, k] = e1[:, i] * e2[:, j] - e1[:, j] * e2[:, i]
         area2 = np.sqrt(_squared_lengths(cross))
         longest = np.sqrt(np.maximum(np.maximum(_squared_lengths(e1), _squared_lengths(e2)), _squared_lengths(e3)))
-        extent = np.maximum.reduce([np.abs(tris[:, c, k]) for c in range(3) for k in range(3)])
+        extent = np.maximum.reduce(np.abs(tris.reshape(n, 9)).T)
         # zero area: a sliver thinner than 1e-12 of its length, or a cross
         # product no larger than the rounding of coordinates this far out
         noise = 64.0 * np.finfo(np.float64).eps * extent * longest
         degenerate = finite & ~(area2 > np.maximum(1e-12 * np.square(longest), noise))
     report.dropped_degenerate_triangles = int(degenerate.sum())
     keep = finite & ~degenerate
+    if keep.all():  # nothing dropped: no copies
+        return tris, normals, uvs, mat_ids, tangents, cross
     return tris[keep], normals[keep], uvs[keep], mat_ids[keep], tangents[keep] if len(tangents) else tangents, cross[keep]
 
 
@@ -178,6 +181,10 @@ def _valid_material_ids(materials: Materials, mat_ids: np.ndarray, report: Valid
 
 def _repaired_normals(normals: np.ndarray, cross: np.ndarray, report: ValidationReport) -> np.ndarray:
     """Unit corner normals; non-finite or zero ones become the face normal."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        unit = np.abs(_squared_lengths(normals.reshape(-1, 3)) - 1.0) < 1e-6  # NaN and Inf compare False
+    if unit.all():  # the exporter's normals (the float32 squares near 1 do not overflow)
+        return normals
     normals64 = normals.astype(np.float64)  # float32 squares overflow above ~1e19
     with np.errstate(invalid="ignore", over="ignore"):
         length = np.sqrt(_squared_lengths(normals64.reshape(-1, 3))).reshape(normals.shape[:2])

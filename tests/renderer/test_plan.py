@@ -12,7 +12,7 @@ from scenes_py import camera_looking_down, make_scene, quad
 from gpu_core.errors import BudgetError
 from gpu_core.plan import Held, plan
 from gpu_core.renderer import Renderer
-from gpu_core.scene import LIGHT_POINT, Lights, Materials, validate
+from gpu_core.scene import LIGHT_POINT, PARTS, Lights, Materials, validate
 from gpu_core.settings import RenderSettings
 
 GI = RenderSettings(mode="gi", samples=2, global_photons=20_000, caustic_photons=20_000, photon_k=20,
@@ -93,6 +93,22 @@ def test_a_part_named_as_edited_is_hashed_again_by_a_later_render_that_names_non
     named = plan(validate(room(power=200.0)), GI, held, edits={"lights"})
     later = Held(digests=named.digests, generations=named.generations, tables=named.tables)
     assert plan(validate(room(power=200.0)), GI, later).changed == {"lights"}
+
+
+def test_a_first_render_hashes_nothing_and_a_later_one_only_parts_with_new_arrays():
+    def hashed(*plans):
+        return {part for p in plans for part, digest in p.digests.items() if digest._value is not None}
+
+    scene = validate(room())
+    first = plan(scene, GI)  # a fresh renderer: nothing held to compare with
+    assert first.changed == set(PARTS) and not hashed(first)
+    held = Held(digests=first.digests, generations=first.generations, tables=first.tables)
+    same = plan(scene, GI, held)  # the very same arrays: only the camera's are made afresh
+    assert same.changed == set() and hashed(first, same) == {"camera"}
+    brighter = plan(dataclasses.replace(scene, lights=room(power=200.0).lights), GI, held)
+    assert brighter.changed == {"lights"} and hashed(first, brighter) == {"camera", "lights"}
+    again = dataclasses.replace(scene, lights=room().lights)  # new arrays, the same values
+    assert plan(again, GI, held).changed == set()
 
 
 def test_the_gi_cache_is_reused_only_for_the_same_view_scene_and_cache_settings():
