@@ -17,8 +17,11 @@ from gpu_core.renderer import Renderer
 
 # GI with another cache setting: alternating the two, every render runs the
 # GI cache stages again (a render with the same settings would reuse them,
-# and one of the same lit scene would keep the records of the last view)
-GI = dataclasses.replace(GI_REUSING, cache_reuse=False)
+# and one of the same lit scene would keep the records of the last view).
+# Image batches of one size (the most pixels a launch may take, and a time
+# aimed at that no batch reaches), so every render polls as often: batches
+# sized by the measured time vary with the machine's load
+GI = dataclasses.replace(GI_REUSING, cache_reuse=False, batch_pixels=64, batch_seconds=10.0)
 OTHER = dataclasses.replace(GI, cache_alpha=GI.cache_alpha + 0.1)
 
 
