@@ -424,7 +424,8 @@ class PartDigest:
     render's fresh renderer never hashes; the large scene's geometry took
     ~40 ms), and a part whose arrays are the very objects of the last
     render's is the same without hashing (callers put new arrays in a scene
-    for what changed and never write into one already rendered)."""
+    for what changed and never write into one already rendered). It holds
+    the part's arrays (a held renderer's digests keep the last scene's)."""
 
     def __init__(self, arrays: list):
         self._arrays = arrays
