@@ -6,7 +6,6 @@ polled between them), then write the passes into Blender's render result.
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
 from typing import Callable
@@ -16,7 +15,7 @@ import numpy as np
 from gpu_core.errors import DeviceError, GpuGiError, RenderCancelled
 
 from .export import export_scene
-from .opencl_devices import survey
+from .opencl_devices import free_unused_device_memory, survey
 from .passes import enabled_passes, wants_denoising_passes, wants_light_passes
 from .status import format_stage_times, mode_line
 
@@ -134,9 +133,7 @@ def job_ended(*_args) -> None:
     global _JOB
     with _HELD_LOCK:
         _JOB = None
-    devices = sys.modules.get("gpu_core.device")
-    if devices is not None:  # else no device was ever opened (and pyopencl may be missing)
-        devices.free_held_memory()
+    free_unused_device_memory()
 
 
 def release_held() -> None:

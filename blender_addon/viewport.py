@@ -29,6 +29,7 @@ from gpu_core.denoise import denoise
 from gpu_core.errors import GpuGiError, RenderCancelled
 
 from .export.camera import pixel_filter, view_camera
+from .opencl_devices import free_unused_device_memory
 from .status import mode_line
 
 COARSE_FACTOR = 4
@@ -263,6 +264,9 @@ class ViewportSession:
         if self._thread is not None:
             self._thread.join(timeout=10.0)
         self._thread = None
+        # the view's renderers go, and their device memory back to the driver
+        self._renderers = {}
+        free_unused_device_memory()
 
     def latest(self) -> tuple[np.ndarray | None, int]:
         """The newest finished image (float RGBA, rows from the bottom) and its version."""

@@ -91,6 +91,7 @@ def test_closing_a_viewport_during_a_render_ends_its_worker_and_the_next_viewpor
         worker = session._thread
         session.stop()  # the engine's __del__ when the viewport closes
         assert not worker.is_alive() and not session.busy
+        assert device._pool.held_blocks == 0  # its device memory went back to the driver
     np.testing.assert_array_equal(_alone(device, scene, GI), expected)
 
 
