@@ -8,8 +8,9 @@ small copy of the render (the same scene and settings, so the same programs
 and launch shapes, but a few pixels, photons and cache points), taking each
 program from the disk cache as the render compiles it: while the render
 builds its programs, the helper compiles the first stages' work-group
-functions, and stays ahead, so the render finds them in PoCL's cache. The helper changes nothing the render computes; a helper that fails
-costs nothing but its core.
+functions, and stays ahead, so the render finds them in PoCL's cache. The
+helper changes nothing the render computes; a helper that fails costs
+nothing but its core.
 
     python -m gpu_core.warmup P:D < pickle of (scene, settings)
 """
@@ -23,7 +24,7 @@ import sys
 from dataclasses import replace
 
 from .device import Device
-from .device.programs import compile_helpers, device_spec, start_helper
+from .device.programs import compile_helpers, device_spec, start_helper, stop_helper
 from .scene.model import Scene
 from .settings import RenderSettings
 
@@ -60,10 +61,7 @@ def start(device: Device, scene: Scene, settings: RenderSettings, programs: list
 
 def stop(process: subprocess.Popen | None) -> None:
     """End the helper (when the render is over, what it has not compiled is not needed)."""
-    if process is not None:
-        if process.poll() is None:
-            process.kill()
-        process.wait()
+    stop_helper(process)
 
 
 def main() -> None:

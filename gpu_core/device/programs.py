@@ -158,6 +158,14 @@ def start_helper(module: str, spec: str, data: bytes) -> subprocess.Popen | None
     return process
 
 
+def stop_helper(process: subprocess.Popen | None) -> None:
+    """End a helper process of start_helper (what it has not done is not needed)."""
+    if process is not None:
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+
+
 def build_options(defines: dict | None = None) -> tuple[str, ...]:
     """Compiler options: the standard, the shared constants, then ``defines``."""
     merged = {**constants.defines(), **(defines or {})}
@@ -259,9 +267,7 @@ class Programs:
             self._await(helpers, given, count)
         finally:
             for process in helpers:
-                if process.poll() is None:
-                    process.kill()
-                process.wait()
+                stop_helper(process)
         for name, defines in given:
             self.get(name, defines)  # from the disk cache, or compiled here where a helper failed
 
