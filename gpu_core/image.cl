@@ -11,6 +11,7 @@
  * illumination cut (IMAGE_GLOSSY_CUT, gi/cut_lookup.h): the photons'
  * irradiance there, direct light included. The light is split into
  * Blender's light passes (PASS_*, device/constants.py). */
+#include "device/launch.h"
 #include "device/rng.h"
 #include "device/sampling.h"
 #include "shading/camera.h"
@@ -468,7 +469,7 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
                            __global float4 *out_combined,
                            __global float *out_depth, __global float4 *out_normal, __global float4 *out_light,
                            __global float4 *out_albedo, __global float4 *out_feature_normal) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     int g = job.window.w + i; /* index in the render window, in pixel order */
     int window_pixels = job.window.x * job.window.y;
     if (i >= job.window.z || g >= window_pixels) return;

@@ -20,6 +20,7 @@
  * before a large node becomes a leaf), KD_SAH_GROUP (work-group size of the SAH
  * search) and KD_SAH_LANES (its work-items per node, a power of two
  * dividing KD_SAH_GROUP). */
+#include "device/launch.h"
 #include "device/structs.h"
 #include "accel/kdtree_clip.h"
 
@@ -90,7 +91,7 @@ inline int KdBuild_sides(float lo, float hi, float plane, bool low_rule) {
 __kernel void KdBuild_init(const __global float4 *verts, const int n,
                            __global int *el_tri, __global float4 *el_lo,
                            __global float4 *el_hi) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     float4 a = verts[3 * i], b = verts[3 * i + 1], c = verts[3 * i + 2];
     el_tri[i] = i;
@@ -104,7 +105,7 @@ __kernel void KdBuild_init(const __global float4 *verts, const int n,
 __kernel void KdBuild_chunk_nodes(const __global int4 *act_info,
                                   const __global int *chunk_base, const int n,
                                   __global int *chunk_node) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
     for (int k = 0; k < chunks; ++k) chunk_node[chunk_base[i] + k] = i;
@@ -135,11 +136,11 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
                                    __global float4 *chunk_hi, const __global int *chunk_total) {
     /* launched over a bound: the chunk count (the scan's total) is read here */
 #if KD_CHUNK_LANES == 1
-    int c = get_global_id(0), lid = 0, size = 1;
+    int c = Launch_global_id(), lid = 0, size = 1;
     if (c >= chunk_total[0]) return;
 #else
     __local float4 lo_s[KD_CHUNK], hi_s[KD_CHUNK];
-    int c = get_group_id(0), lid = get_local_id(0), size = get_local_size(0);
+    int c = Launch_group_id(), lid = get_local_id(0), size = get_local_size(0);
     if (c >= chunk_total[0]) return; /* the whole group */
 #endif
     int begin, end;
@@ -183,7 +184,7 @@ __kernel void KdBuild_large_split(const __global float4 *act_lo,
                                   const __global float4 *chunk_hi, const int n,
                                   __global float *node_split,
                                   __global int *node_mode) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int first = chunk_base[i];
     int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
@@ -254,7 +255,7 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
                                      __global float4 *below_hi,
                                      __global float4 *above_lo,
                                      __global float4 *above_hi) {
-    int e = get_global_id(0);
+    int e = Launch_global_id();
     if (e >= n) return;
     int node = el_node[e];
     int mode = node_mode[node];
@@ -327,7 +328,7 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
                                      const int max_depth, const int force_leaf,
                                      __global int2 *node_counts,
                                      __global int8 *counters) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int4 info = act_info[i];
     int end = info.x + info.y;
@@ -374,7 +375,7 @@ __kernel void KdBuild_large_emit(
     __global float4 *next_lo, __global float4 *next_hi,
     __global int4 *next_info, __global int4 *small_roots,
     __global int4 *node_dest) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int4 info = act_info[i];
     int8 base = counter_scan[i];
@@ -445,7 +446,7 @@ __kernel void KdBuild_large_scatter(
     __global float4 *next_hi, __global int *small_tri,
     __global float4 *small_lo, __global float4 *small_hi,
     __global int *leaf_tris) {
-    int e = get_global_id(0);
+    int e = Launch_global_id();
     if (e >= n) return;
     int node = el_node[e];
     long rank = flag_scan[e] - flag_scan[act_info[node].x];
@@ -479,7 +480,7 @@ __kernel void KdBuild_large_scatter(
 __kernel void KdBuild_small_init(const __global int4 *small_roots, const int n,
                                  __global int *sel_root, __global int2 *sn_node,
                                  __global ulong *sn_mask) {
-    int r = get_global_id(0);
+    int r = Launch_global_id();
     if (r >= n) return;
     int4 root = small_roots[r];
     for (int k = 0; k < root.y; ++k) sel_root[root.x + k] = r;
@@ -497,7 +498,7 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
                                   const __global float4 *sel_lo,
                                   const __global float4 *sel_hi, const int n,
                                   __global ulong2 *cand) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= n) return;
     int e = c / 6, axis = (c % 6) >> 1, side = c & 1;
     int4 root = small_roots[sel_root[e]];
@@ -567,7 +568,7 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
                                  const int max_depth, __global int *best) {
     __local float cost_s[KD_SAH_GROUP];
     __local int cand_s[KD_SAH_GROUP];
-    int i = get_global_id(0) / KD_SAH_LANES, lane = get_global_id(0) % KD_SAH_LANES;
+    int i = Launch_global_id() / KD_SAH_LANES, lane = Launch_global_id() % KD_SAH_LANES;
     int lid = get_local_id(0);
     float my_cost = INFINITY;
     int my_cand = -1;
@@ -635,7 +636,7 @@ __kernel void KdBuild_small_emit(
     __global int4 *rec_info, __global float *rec_split,
     __global int2 *next_node, __global ulong *next_mask,
     __global int *leaf_tris) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int2 node = sn_node[i];
     ulong mask = sn_mask[i];
@@ -676,7 +677,7 @@ __kernel void KdBuild_small_emit(
 __kernel void KdBuild_subtree_size(const __global int4 *rec_info,
                                    const int begin, const int end,
                                    __global int *size) {
-    int p = begin + get_global_id(0);
+    int p = begin + Launch_global_id();
     if (p >= end) return;
     int4 info = rec_info[p];
     size[p] = info.x == KD_LEAF ? 1 : 1 + size[info.y] + size[info.z];
@@ -688,7 +689,7 @@ __kernel void KdBuild_subtree_size(const __global int4 *rec_info,
 __kernel void KdBuild_preorder(const __global int4 *rec_info,
                                const __global int *size, const int begin,
                                const int end, __global int *addr) {
-    int p = begin + get_global_id(0);
+    int p = begin + Launch_global_id();
     if (p >= end) return;
     int4 info = rec_info[p];
     if (info.x == KD_LEAF) return;
@@ -701,7 +702,7 @@ __kernel void KdBuild_output(const __global int4 *rec_info,
                              const __global float *rec_split,
                              const __global int *addr, const int n,
                              __global KdNode *nodes) {
-    int p = get_global_id(0);
+    int p = Launch_global_id();
     if (p >= n) return;
     int4 info = rec_info[p];
     KdNode node;
@@ -723,7 +724,7 @@ __kernel void KdBuild_output(const __global int4 *rec_info,
 
 /* Chunks of each active large node. */
 __kernel void KdBuild_chunk_counts(const __global int4 *act_info, const int n, __global int *counts) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) counts[i] = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
 }
 
@@ -731,7 +732,7 @@ __kernel void KdBuild_chunk_counts(const __global int4 *act_info, const int n, _
  * children), or its triangle count in the high word for a leaf. */
 __kernel void KdBuild_small_ranks(const __global int *best, const __global ulong *mask, const int n,
                                   __global long *ranks) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) ranks[i] = best[i] >= 0 ? 1L : ((long)popcount(mask[i]) << 32);
 }
 
@@ -740,7 +741,7 @@ __kernel void KdBuild_small_ranks(const __global int *best, const __global ulong
 __kernel void KdBuild_statistics(const __global int4 *rec_info, const __global float4 *rec_lo,
                                  const __global float4 *rec_hi, const int n, __global float4 *terms,
                                  __global int4 *sizes) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int4 info = rec_info[i];
     bool leaf = info.x == KD_LEAF;

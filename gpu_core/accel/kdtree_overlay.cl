@@ -4,6 +4,7 @@
  * union node whose plane is NaN: traversal takes every ray "inside the
  * plane" (accel/kdtree_traverse.h) and visits both subtrees over the whole
  * ray, without an early stop between them. */
+#include "device/launch.h"
 #include "device/structs.h"
 
 /* The joined node array: the union root, then the base tree's nodes, then
@@ -12,7 +13,7 @@
 __kernel void KdOverlay_nodes(const __global KdNode *base, const int base_count,
                               const __global KdNode *over, const int over_count,
                               const int base_refs, __global KdNode *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i > base_count + over_count) return;
     if (i == 0) {
         KdNode root;
@@ -39,7 +40,7 @@ __kernel void KdOverlay_leaves(const __global int *base_tris, const int base_ref
                                const __global uchar *moved, const __global int *over_tris,
                                const __global int *rows, const int over_refs,
                                __global int *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < base_refs) {
         int tri = base_tris[i];
         out[i] = moved[tri] ? -1 : tri;

@@ -1,4 +1,5 @@
 /* Batch queries on the triangle kd-tree, for tests and benchmarks. */
+#include "device/launch.h"
 #include "accel/kdtree_traverse.h"
 
 /* Closest hit per ray in (tmin, tmax): t, triangle index (-1 on a miss)
@@ -8,7 +9,7 @@ __kernel void KdQuery_closest(KDTREE_PARAMS, const __global float4 *org,
                               const __global float2 *range,
                               __global float *t_out, __global int *tri_out,
                               __global float2 *uv_out, const int n) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     KdTree tree = KDTREE_MAKE();
     Hit hit;
@@ -23,7 +24,7 @@ __kernel void KdQuery_occluded(KDTREE_PARAMS, const __global float4 *org,
                                const __global float4 *dir,
                                const __global float2 *range, __global int *out,
                                const int n) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     KdTree tree = KDTREE_MAKE();
     out[i] = KdTree_occluded(&tree, org[i].xyz, dir[i].xyz, range[i].x, range[i].y) ? 1 : 0;

@@ -17,6 +17,7 @@
  * point coordinate) of least VVH cost. Output stage: subtree
  * sizes and photon sums bottom-up, preorder addresses top-down, then the
  * traversal nodes, node payloads and points in leaf order. */
+#include "device/launch.h"
 #include "device/axis.h"
 #include "accel/point_tree.h"
 
@@ -87,7 +88,7 @@ inline void PointBuild_write_chunks(__global Chunk *chunks, int at, int n, int s
 /* The root's chunks (chunk_end[0]: their number, set by the host). */
 __kernel void PointBuild_root_chunks(const __global BuildNode *nodes, const __global int *chunk_end,
                                      __global Chunk *chunks) {
-    if (get_global_id(0) != 0) return;
+    if (Launch_global_id() != 0) return;
     PointBuild_write_chunks(chunks, 0, chunk_end[0], 0, nodes[0].start, nodes[0].count);
 }
 
@@ -95,7 +96,7 @@ __kernel void PointBuild_root_chunks(const __global BuildNode *nodes, const __gl
 __kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __global float4 *pts,
                                  __global float4 *chunk_lo, __global float4 *chunk_hi,
                                  const __global int *chunk_end, const int n_active) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
     Chunk ch = chunks[c];
     float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
@@ -138,7 +139,7 @@ __kernel void PointBuild_large_decide(const __global int *active, __global Build
                                  const __global int *chunk_end, const __global float4 *chunk_lo,
                                  const __global float4 *chunk_hi, const float empty_ratio,
                                  const int max_depth, __global float4 *x_plane, const int n_active) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= n_active) return;
     int id = active[j];
     BuildNode nd = nodes[id];
@@ -195,7 +196,7 @@ __kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __
                                      const __global BuildNode *nodes, const __global float4 *x_plane,
                                      const __global float4 *pts, __global int *chunk_left,
                                      const __global int *chunk_end, const int n_active, const int bound) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= bound) return;
     if (c >= PointBuild_chunk_total(chunk_end, n_active)) {
         chunk_left[c] = 0;
@@ -259,7 +260,7 @@ __kernel void PointBuild_large_split(const __global int *active, __global BuildN
                                 const __global int *chunk_end, const __global int *left_end,
                                 const __global float4 *x_plane, const int child_base, const int max_depth,
                                 __global int8 *classes, const int n_active) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= n_active) return;
     int id = active[j];
     BuildNode nd = nodes[id];
@@ -314,7 +315,7 @@ __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __glo
                                   const __global float4 *pts, __global float4 *out,
                                   const __global int *chunk_left, const __global int *left_end,
                                   const __global int *chunk_end, const int n_active) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
     Chunk ch = chunks[c];
     BuildNode nd = nodes[active[ch.slot]];
@@ -342,7 +343,7 @@ __kernel void PointBuild_lists(const __global int8 *classes, const __global int8
                                const int n, const __global BuildNode *nodes, const __global float4 *from,
                                __global float4 *to, __global int *large, __global int *small,
                                __global int *chunk_end, __global Chunk *chunks) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int8 c = classes[i], at = scanned[i];
     BuildNode nd = nodes[base + i];
@@ -366,7 +367,7 @@ __kernel void PointBuild_lists(const __global int8 *classes, const __global int8
 __kernel void PointBuild_small_roots(const __global int *roots, __global BuildNode *nodes,
                                 const __global float4 *pts, __global uint *masks,
                                 __global float *radius, const float k_hint, const int n_roots) {
-    int r = get_global_id(0);
+    int r = Launch_global_id();
     if (r >= n_roots) return;
     int id = roots[r];
     BuildNode nd = nodes[id];
@@ -435,7 +436,7 @@ __kernel void PointBuild_small_decide(const __global int *active, __global Build
                                  const float radius, const float cost_traverse,
                                  const int max_depth, __global int *split_flag,
                                  __global int *cand, const int n_active) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= n_active) return;
     int id = active[j];
     BuildNode nd = nodes[id];
@@ -483,7 +484,7 @@ __kernel void PointBuild_small_split(const __global int *splitting, const __glob
                                 __global BuildNode *nodes, const __global int *cand,
                                 const __global uint *masks, const int child_base,
                                 __global int *next_active, const int n_split) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= n_split) return;
     int slot = splitting[j];
     int id = active[slot];
@@ -563,7 +564,7 @@ __kernel void PointBuild_sums(const __global BuildNode *nodes, const __global fl
                          const __global float4 *normal, const int has_photons,
                          __global int *size, __global BuildSums *sums, const int base,
                          const int n, const int x_first, const int x_end) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int id = base + i;
     int left = nodes[id].left;
@@ -591,7 +592,7 @@ inline void PointBuild_child_order(int id, int left, const __global BuildNode *n
 __kernel void PointBuild_preorder(const __global BuildNode *nodes, const __global int *size,
                              __global int *addr, __global int *first, const int base,
                              const int n, const int x_first, const int x_end) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int id = base + i;
     int left = nodes[id].left;
@@ -616,7 +617,7 @@ __kernel void PointBuild_emit(const __global BuildNode *nodes, const __global Bu
                          __global PointNode *out_info, __global float4 *out_pts,
                          __global float4 *out_power, __global float4 *out_dir,
                          __global float4 *out_normal, const int n) {
-    int id = get_global_id(0);
+    int id = Launch_global_id();
     if (id >= n) return;
     BuildNode nd = nodes[id];
     if (nd.count < 0) return; /* a hole */

@@ -1,5 +1,6 @@
 /* Batch queries on the point kd-tree: k nearest neighbours, and irradiance
  * or Lambertian radiance by density estimation. Built with -D KNN_K=k. */
+#include "device/launch.h"
 #include "accel/point_tree_knn.h"
 #include "accel/point_density.h"
 
@@ -10,7 +11,7 @@ __kernel void PointTree_knn_batch(POINT_TREE_PARAMS, const __global float4 *quer
                                   const __global int *order, const float max_d2,
                                   const int n_queries, __global int *out_id,
                                   __global float *out_d2) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n_queries) return;
     int q = order[i];
     PointTree tree = POINT_TREE_MAKE();
@@ -36,7 +37,7 @@ __kernel void PointTree_density_batch(POINT_TREE_PARAMS, PHOTON_PARAMS,
                                       const int filter, const float normal_cos,
                                       const int as_radiance, const int n_queries,
                                       __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n_queries) return;
     int q = order ? order[i] : i;
     PointTree tree = POINT_TREE_MAKE();

@@ -6,6 +6,9 @@ on a CPU, 128 on a GPU, never above what the kernel allows), its global size
 padded to that (kernels guard their tail) and a zero offset, so a driver
 that compiles per launch shape compiles each kernel once. Kernels with
 barriers launch whole work-groups of their compile-time group size instead.
+Every launch is a 2D grid of rows of at most ROW work-items (device/launch.h
+gives a kernel its linear index): PoCL compiles another work-group function
+of a kernel for a launch 65,536 work-items wide or wider.
 
 Setting a kernel's arguments is not thread-safe in OpenCL: a launch sets
 them and enqueues under the kernel's own lock (the arguments are captured at
@@ -20,6 +23,7 @@ import numpy as np
 import pyopencl as cl
 
 _TARGET = {"cpu": 64, "gpu": 128}
+ROW = 1 << 15  # work-items in a row of a launch grid at most (device/launch.h)
 
 
 def local_size(kernel: cl.Kernel, device: cl.Device) -> int:
@@ -34,6 +38,15 @@ def local_size(kernel: cl.Kernel, device: cl.Device) -> int:
     if size > largest:  # the kernel allows less than one preferred multiple
         size = 1 << (largest.bit_length() - 1)
     return size
+
+
+def grid(global_size: int, group: int) -> tuple[int, int]:
+    """The 2D launch grid of ``global_size`` work-items in groups of
+    ``group``: rows of at most ROW work-items, as even as whole groups allow
+    (the last row pads by fewer groups than there are rows)."""
+    groups = global_size // group
+    rows = -(-groups // max(1, ROW // group))
+    return -(-groups // rows) * group, rows
 
 
 class Kernel:
@@ -62,7 +75,7 @@ class Kernel:
             if not self._typed:
                 self._declare_scalars(args)
             self.kernel.set_args(*args)
-            cl.enqueue_nd_range_kernel(self.queue, self.kernel, (global_size,), (group,))
+            cl.enqueue_nd_range_kernel(self.queue, self.kernel, grid(global_size, group), (group, 1))
 
     def _declare_scalars(self, args) -> None:
         """Tell pyopencl the types of the scalar arguments (numpy scalars on

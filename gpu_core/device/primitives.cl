@@ -7,6 +7,7 @@
  * Every work item owns one chunk of PRIM_CHUNK consecutive elements and
  * walks it in order: sums come out the same on every run, and the sort is
  * stable (equal keys stay in index order). */
+#include "device/launch.h"
 
 #define PRIM_CHUNK 256
 #define PRIM_RADIX (1 << PRIM_RADIX_BITS)
@@ -19,7 +20,7 @@
 #define PRIM_SCAN(T, NAME)                                                                        \
     __kernel void Prim_scan_serial_##NAME(const __global T *in, __global T *out, const int n,     \
                                           const int inclusive, __global T *total) {               \
-        if (get_global_id(0) != 0) return;                                                        \
+        if (Launch_global_id() != 0) return;                                                      \
         T sum = (T)(0);                                                                           \
         for (int i = 0; i < n; ++i) {                                                             \
             T v = in[i];                                                                          \
@@ -30,7 +31,7 @@
     }                                                                                             \
     __kernel void Prim_scan_reduce_##NAME(const __global T *in, const int n, __global T *sums,   \
                                           const int chunks) {                                     \
-        int c = get_global_id(0);                                                                 \
+        int c = Launch_global_id();                                                               \
         if (c >= chunks) return;                                                                  \
         T sum = (T)(0);                                                                           \
         for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) sum += in[i];    \
@@ -39,7 +40,7 @@
     __kernel void Prim_scan_apply_##NAME(const __global T *in, __global T *out, const int n,      \
                                          const int inclusive, const __global T *offsets,          \
                                          const int chunks) {                                      \
-        int c = get_global_id(0);                                                                 \
+        int c = Launch_global_id();                                                               \
         if (c >= chunks) return;                                                                  \
         T sum = offsets[c];                                                                       \
         for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) {                \
@@ -59,7 +60,7 @@ PRIM_SCAN(int8, int8)
 #define PRIM_REDUCE(T, NAME, ZERO, COMBINE)                                                       \
     __kernel void Prim_reduce_##NAME(const __global T *in, const int n, __global T *out,          \
                                      const int chunks) {                                          \
-        int c = get_global_id(0);                                                                 \
+        int c = Launch_global_id();                                                               \
         if (c >= chunks) return;                                                                  \
         T acc = ZERO;                                                                             \
         for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) {                \
@@ -88,13 +89,13 @@ PRIM_REDUCE(float8, sum_float8, (float8)(0.0f), Prim_two_sum)
 
 /* float4 values as (value, no error) float8s, for Prim_reduce_sum_float8. */
 __kernel void Prim_float8_of(const __global float4 *in, const int n, __global float8 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = (float8)(in[i], (float4)(0.0f));
 }
 
 /* int values as (value, 0, 0, 0) int4s, for the int4 reductions. */
 __kernel void Prim_int4_of(const __global int *in, const int n, __global int4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = (int4)(in[i], 0, 0, 0);
 }
 
@@ -104,7 +105,7 @@ __kernel void Prim_int4_of(const __global int *in, const int n, __global int4 *o
  * the host clears the flag first). */
 __kernel void Prim_flag_difference(const __global int *a, const __global int *b, const int n,
                                    __global int *flag, const int chunks) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= chunks) return;
     int differ = 0;
     for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) differ |= a[i] ^ b[i];
@@ -116,39 +117,39 @@ __kernel void Prim_flag_difference(const __global int *a, const __global int *b,
 /* base + i for every i whose flag is set, at its exclusive prefix sum. */
 __kernel void Prim_compact(const __global int *flags, const __global int *scanned, const int n, const int base,
                            __global int *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n && flags[i]) out[scanned[i]] = base + i;
 }
 
 /* out[i] = values[index[i]] for float4 rows. */
 __kernel void Prim_gather_float4(const __global float4 *values, const __global int *index, const int n,
                                  __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = values[index[i]];
 }
 
 /* out[index[i]] = values[i] for float4 rows. */
 __kernel void Prim_scatter_float4(const __global float4 *values, const __global int *index, const int n,
                                   __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[index[i]] = values[i];
 }
 
 /* out[i] = values[index[i]] for ints. */
 __kernel void Prim_gather_int(const __global int *values, const __global int *index, const int n, __global int *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = values[index[i]];
 }
 
 /* Each point with its index in w (int bits), as the point-tree builder takes them. */
 __kernel void Prim_indexed_points(const __global float4 *points, const int n, __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = (float4)(points[i].xyz, as_float(i));
 }
 
 /* values[i] = i. */
 __kernel void Prim_iota(__global int *values, const int n) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) values[i] = i;
 }
 
@@ -158,7 +159,7 @@ __kernel void Prim_iota(__global int *values, const int n) {
  * exclusive scan of the table gives every (digit, chunk) its first slot. */
 __kernel void Prim_radix_count(const __global uint *keys, const int n, const int shift, __global int *table,
                                const int chunks) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= chunks) return;
     int hist[PRIM_RADIX];
     for (int d = 0; d < PRIM_RADIX; ++d) hist[d] = 0;
@@ -171,7 +172,7 @@ __kernel void Prim_radix_count(const __global uint *keys, const int n, const int
 __kernel void Prim_radix_scatter(const __global uint *keys, const __global int *values, __global uint *keys_out,
                                  __global int *values_out, const int n, const int shift, const __global int *table,
                                  const int chunks) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= chunks) return;
     int slot[PRIM_RADIX];
     for (int d = 0; d < PRIM_RADIX; ++d) slot[d] = table[d * chunks + c];
@@ -186,7 +187,7 @@ __kernel void Prim_radix_scatter(const __global uint *keys, const __global int *
 /* For sorted keys, [start[k], end[k]) is the run of key k; both arrays are
  * zero beforehand, so absent keys give empty runs. */
 __kernel void Prim_group_ranges(const __global uint *keys, const int n, __global int *start, __global int *end) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     uint key = keys[i];
     if (i == 0 || keys[i - 1] != key) start[key] = i;

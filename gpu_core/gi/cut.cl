@@ -4,6 +4,7 @@
  * estimates; and a batch lookup of the irradiance it gives (cut_lookup.h).
  * A node's "mixed" flag: its photons lie on surfaces facing different ways
  * (|mean photon normal| below CUT_COHERENT) while it has children. */
+#include "device/launch.h"
 #include "accel/point_density.h"
 #include "gi/cut_lookup.h"
 
@@ -19,7 +20,7 @@ inline bool Cut_mixed(const __global KdNode *nodes, const __global PointNode *in
 
 /* parent[child] for both children of every inner node (the root keeps -1). */
 __kernel void Cut_parents(const __global KdNode *nodes, const int n, __global int *parent) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n || nodes[i].axis == KD_LEAF) return;
     parent[i + 1] = i;
     parent[nodes[i].child] = i;
@@ -31,7 +32,7 @@ __kernel void Cut_parents(const __global KdNode *nodes, const int n, __global in
 __kernel void Cut_coarse(const __global KdNode *nodes, const __global PointNode *info,
                          const __global int *parent, const int n, const float e_min, __global int *in_cut,
                          __global float4 *exact) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     bool marked = Cut_approx(info, i) >= e_min && !Cut_mixed(nodes, info, i);
     bool covered = false;
@@ -46,7 +47,7 @@ __kernel void Cut_coarse(const __global KdNode *nodes, const __global PointNode 
  * with its normal (+Z where unknown). */
 __kernel void Cut_exact(POINT_TREE_PARAMS, PHOTON_PARAMS, const __global PointNode *info,
                         const __global int *in_cut, const int n, const int k, __global float4 *exact) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n || !in_cut[i] || exact[i].w > 0.0f) return;
     PointTree tree = POINT_TREE_MAKE();
     PhotonData ph = PHOTON_DATA_MAKE();
@@ -65,7 +66,7 @@ __kernel void Cut_exact(POINT_TREE_PARAMS, PHOTON_PARAMS, const __global PointNo
 __kernel void Cut_split(const __global KdNode *nodes, const __global PointNode *info, const __global float4 *exact,
                         const int n, const float delta, const __global int *in_cut, __global int *next,
                         volatile __global int *refined) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n || !in_cut[i] || nodes[i].axis == KD_LEAF || !(exact[i].w > 0.0f)) return;
     float e = Sampling_luminance(exact[i].xyz);
     if (!(fabs(Cut_approx(info, i) - e) > delta * e || Cut_mixed(nodes, info, i))) return;
@@ -81,7 +82,7 @@ __kernel void Cut_split(const __global KdNode *nodes, const __global PointNode *
 __kernel void Cut_emit(const __global PointNode *info, const __global float4 *exact, const __global int *ids,
                        const int count, __global float4 *centre, __global float4 *normal,
                        __global float4 *irradiance) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= count) return;
     PointNode nd = info[ids[j]];
     float3 extent = nd.hi.xyz - nd.lo.xyz;
@@ -97,7 +98,7 @@ __kernel void Cut_emit(const __global PointNode *info, const __global float4 *ex
  * and unit normals). */
 __kernel void Cut_lookup(CUT_PARAMS, const __global float4 *points, const __global float4 *normals, const int n,
                          __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     Cut cut = CUT_MAKE();
     out[i] = (float4)(CutLookup_irradiance(&cut, points[i].xyz, normals[i].xyz), 0.0f);
@@ -106,7 +107,7 @@ __kernel void Cut_lookup(CUT_PARAMS, const __global float4 *points, const __glob
 /* Each node's irradiance plus its caustic estimate (the cut gathering reads). */
 __kernel void Cut_add_irradiance(const __global float4 *irradiance, const __global float4 *caustic, const int n,
                                  __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = (float4)(irradiance[i].xyz + caustic[i].xyz, 0.0f);
 }
 
@@ -114,14 +115,14 @@ __kernel void Cut_add_irradiance(const __global float4 *irradiance, const __glob
 
 /* Each node's depth (x), for the deepest level. */
 __kernel void Cut_depths(const __global PointNode *info, const int n, __global int4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = (int4)(info[i].depth, 0, 0, 0);
 }
 
 /* (E~_p luminance, 0, 1, 0) of the lit nodes on levels a and b, else 0: summed, E_min's numerator and count. */
 __kernel void Cut_level_terms(const __global PointNode *info, const int n, const int a, const int b,
                               __global float4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     float e = Cut_approx(info, i);
     bool on = (info[i].depth == a || info[i].depth == b) && e > 0.0f;
@@ -130,14 +131,14 @@ __kernel void Cut_level_terms(const __global PointNode *info, const int n, const
 
 /* 1 for a cut node that holds photons (empty leaves end their paths but give no light). */
 __kernel void Cut_kept(const __global int *in_cut, const __global PointNode *info, const int n, __global int *flags) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) flags[i] = in_cut[i] != 0 && info[i].count > 0;
 }
 
 /* (in the cut, a leaf in the cut holding photons, mixed, 0) per node, for the statistics. */
 __kernel void Cut_tally(const __global KdNode *nodes, const __global PointNode *info, const __global int *in_cut,
                         const int n, __global int4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     bool cut = in_cut[i] != 0;
     out[i] = (int4)(cut, cut && info[i].count > 0 && nodes[i].axis == KD_LEAF, Cut_mixed(nodes, info, i), 0);

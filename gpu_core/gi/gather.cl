@@ -12,6 +12,7 @@
  * spread over the group and reduced in local memory to the sample's
  * irradiance (with cosine sampling, the mean of albedo(y) E(y)), the
  * harmonic mean distance of its hits, and its hit count. */
+#include "device/launch.h"
 #include "device/rng.h"
 #include "device/sampling.h"
 #include "shading/surface.h"
@@ -76,20 +77,21 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
     return sum;
 }
 
-/* Work-group g gathers sample first + g. Outputs per sample: irradiance
+/* Work-group g gathers sample first + g, for the samples before end (a
+ * launch's grid may hold a few groups more). Outputs per sample: irradiance
  * (rgb), harmonic mean hit distance (INFINITY when no ray hit), hits. */
 __kernel void Gather_samples(SCENE_PARAMS, CUT_PARAMS, const __global float4 *sample_pos, const __global float4 *sample_nrm,
-                             const int first, const int sample_count, const int strata, const int max_specular,
+                             const int first, const int end, const int strata, const int max_specular,
                              const uint seed, __global float4 *out_irradiance, __global float *out_distance,
                              __global int *out_hits) {
     __local float4 sum_s[GATHER_GROUP];
     __local int hits_s[GATHER_GROUP];
-    int s = first + get_group_id(0), lid = get_local_id(0);
+    int s = first + Launch_group_id(), lid = get_local_id(0);
     int rays = strata * strata;
     float3 sum = (float3)(0.0f);
     float inv_distance = 0.0f;
     int hits = 0;
-    if (s < sample_count) {
+    if (s < end) {
         SceneView sc = SCENE_MAKE();
         Cut cut = CUT_MAKE();
         float3 p = sample_pos[s].xyz, n = sample_nrm[s].xyz;
@@ -112,7 +114,7 @@ __kernel void Gather_samples(SCENE_PARAMS, CUT_PARAMS, const __global float4 *sa
         }
         barrier(CLK_LOCAL_MEM_FENCE);
     }
-    if (lid == 0 && s < sample_count) {
+    if (lid == 0 && s < end) {
         float4 total = sum_s[0];
         out_irradiance[s] = (float4)(total.xyz / (float)rays, 0.0f);
         out_distance[s] = hits_s[0] > 0 ? (float)hits_s[0] / total.w : INFINITY;

@@ -4,6 +4,7 @@
  * likelier of their directions) to the first surface with a smooth lobe;
  * it holds a point where it has a diffuse lobe (a glossy-only surface has
  * none: camera paths go on from it and read the cut, image.cl). */
+#include "device/launch.h"
 #include "device/sampling.h"
 #include "shading/camera.h"
 #include "shading/surface.h"
@@ -20,7 +21,7 @@
  * y0, x1, y1) of the full image. */
 __kernel void ShadingPoints_trace(SCENE_PARAMS, const int4 window, const int sub, const int max_bounces,
                                   __global float4 *out_pos, __global float4 *out_nrm) {
-    int g = get_global_id(0);
+    int g = Launch_global_id();
     int w = window.z - window.x, h = window.w - window.y;
     if (g >= w * h * sub * sub) return;
     int pixel = g / (sub * sub), s = g % (sub * sub);
@@ -70,7 +71,7 @@ __kernel void ShadingPoints_trace(SCENE_PARAMS, const int4 window, const int sub
  * as 0 (the other slots stay as they were: zero). */
 __kernel void ShadingPoints_scatter(const __global float4 *values, const __global int *slots, const int n,
                                     __global float4 *grid) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     float4 v = values[i];
     grid[slots[i]] = (float4)(isfinite(v.x) ? v.x : 0.0f, isfinite(v.y) ? v.y : 0.0f, isfinite(v.z) ? v.z : 0.0f,
@@ -79,14 +80,14 @@ __kernel void ShadingPoints_scatter(const __global float4 *values, const __globa
 
 /* 1 where a grid slot holds a point. */
 __kernel void ShadingPoints_found(const __global float4 *grid_pos, const int n, __global int *flags) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) flags[i] = grid_pos[i].w > 0.0f;
 }
 
 /* The pixel (x, y) in the window of each point, from its slot. */
 __kernel void ShadingPoints_pixels(const __global int *slots, const int n, const int width, const int sub2,
                                    __global int2 *pixels) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int p = slots[i] / sub2;
     pixels[i] = (int2)(p % width, p / width);

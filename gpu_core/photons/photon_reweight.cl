@@ -5,12 +5,13 @@
  * photon's emitter is in its power's w (photon_trace.cl). Every node of the
  * photon tree then sums its photons again: the power and the approximate
  * irradiance the illumination cut reads (accel/point_tree_build.cl). */
+#include "device/launch.h"
 #include "accel/point_tree.h"
 
 /* Scale each photon (leaf order) by its emitter's row of `scales`. */
 __kernel void PhotonReweight_scale(__global float4 *power, const __global float4 *scales, const int n_emitters,
                                    const int n) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     float4 p = power[i];
     int e = clamp((int)p.w, 0, n_emitters - 1);
@@ -22,7 +23,7 @@ __kernel void PhotonReweight_scale(__global float4 *power, const __global float4
  * r_p and normal n_p stay as built. */
 __kernel void PhotonReweight_refit(__global PointNode *info, const __global float4 *power,
                                    const __global float4 *dir, const int n_nodes) {
-    int id = get_global_id(0);
+    int id = Launch_global_id();
     if (id >= n_nodes) return;
     PointNode node = info[id];
     float3 sum = (float3)(0.0f), m0 = sum, m1 = sum, m2 = sum;

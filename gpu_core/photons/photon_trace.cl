@@ -21,6 +21,7 @@
  * (Photon_reorder): the same scene gives the same photon maps. A photon's
  * power carries the index of its emitter in w, so that a change of light
  * power alone reweights the maps instead (photon_reweight.cl). */
+#include "device/launch.h"
 #include "shading/surface.h"
 #include "photons/photon_emit.h"
 
@@ -70,8 +71,8 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
                            const int capacity, __global float4 *out_pos, __global float4 *out_dir,
                            __global float4 *out_power, __global float4 *out_normal, __global uint *out_key,
                            const uint key_stride, __global float4 *path_out, const int step) {
-    if (get_global_id(0) >= (n_photons + step - 1) / step) return;
-    int i = get_global_id(0) * step;
+    if (Launch_global_id() >= (n_photons + step - 1) / step) return;
+    int i = Launch_global_id() * step;
     SceneView sc = SCENE_MAKE();
     Rng rng = Rng_make((uint)i, pass == PHOTON_PASS_CAUSTIC ? 1u : 0u, seed); /* one stream per map */
     int emitter = Photon_emitter(emitters, n_emitters, i);
@@ -131,7 +132,7 @@ __kernel void Photon_reorder(const __global int *order, const int n, const __glo
                              const __global float4 *dir, const __global float4 *power, const __global float4 *normal,
                              __global float4 *out_pos, __global float4 *out_dir, __global float4 *out_power,
                              __global float4 *out_normal) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= n) return;
     int o = order[j];
     out_pos[j] = (float4)(pos[o].xyz, as_float(j));

@@ -1,6 +1,7 @@
 /* The BSDF as tests probe it (tests/shading): directions sampled from one
  * material seen from one direction, and the BSDF evaluated on given
  * directions, all in the frame of a surface whose geometric normal is +z. */
+#include "device/launch.h"
 #include "device/rng.h"
 #include "shading/bsdf.h"
 
@@ -18,7 +19,7 @@ inline Bsdf BsdfCheck_make(const __global Material *m, float4 wo, float4 ns, int
 __kernel void BsdfCheck_sample(const __global Material *m, const float4 wo, const float4 ns, const int entering,
                                const int sample, const uint seed, const int n, __global float4 *out_dir,
                                __global float4 *out_weight) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     Bsdf f = BsdfCheck_make(m, wo, ns, entering, sample);
     Rng rng = Rng_make((uint)i, 7u, seed);
@@ -35,7 +36,7 @@ __kernel void BsdfCheck_sample(const __global Material *m, const float4 wo, cons
 __kernel void BsdfCheck_eval(const __global Material *m, const float4 wo, const float4 ns, const int entering,
                              const int sample, const __global float4 *wi, const int n, __global float4 *out_diffuse,
                              __global float4 *out_glossy) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     Bsdf f = BsdfCheck_make(m, wo, ns, entering, sample);
     float3 d;

@@ -11,6 +11,7 @@ import pytest
 from conftest import ROOT
 
 import gpu_core.device.programs as programs_module
+from gpu_core.gi.cache import interpolation, outliers
 from gpu_core.device import get_device, list_devices, load_source
 from gpu_core.errors import DeviceError
 
@@ -31,6 +32,7 @@ _PROBE = """
 import json, sys, pathlib
 import numpy as np, pyopencl as cl
 import gpu_core.device.programs as programs_module
+from gpu_core.gi.cache import interpolation, outliers
 from gpu_core.device import get_device
 programs_module.INCLUDE_ROOT = pathlib.Path(sys.argv[1])
 dev = get_device()
@@ -57,6 +59,7 @@ import sys, pathlib
 import numpy as np
 import pyopencl as cl
 import gpu_core.device.programs as programs_module
+from gpu_core.gi.cache import interpolation, outliers
 from gpu_core.device import get_device
 programs_module.INCLUDE_ROOT = pathlib.Path(sys.argv[1])
 dev = get_device()
@@ -159,6 +162,19 @@ def test_program_is_built_once_per_process_and_per_define_set(device, tmp_path, 
     assert len(list((tmp_path / "cache").glob("probe_once-*.bin"))) == 2
 
 
+def test_programs_without_defines_of_their_own_are_built_as_one_bundle(device, tmp_path, monkeypatch):
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+    programs = programs_module.Programs(device.context, device.device)
+    programs.build_all([(name, {}) for name in programs_module.BUNDLED])
+    assert [r.name for r in programs.builds] == [programs_module.BUNDLE]
+    bundle = programs.get("gi/cache/grid.cl")
+    assert all(programs.get(name) is bundle for name in programs_module.BUNDLED)
+    assert {"Prim_iota", "Cache_grid_keys", "Cache_normalise"} <= {k.function_name for k in bundle.all_kernels()}
+    # with defines of its own a bundled program is built alone
+    alone = programs.get("gi/cache/grid.cl", {"GRID_UNUSED": 1})
+    assert alone is not bundle and [k.function_name for k in alone.all_kernels()] == ["Cache_grid_keys"]
+
+
 def test_second_process_loads_the_program_from_the_disk_cache(tmp_path):
     kernels = _kernel_dir(tmp_path / "kernels")
     cache = tmp_path / "cache"
@@ -201,9 +217,9 @@ def test_damaged_cache_file_is_rebuilt_and_replaced(tmp_path, damage):
     assert _run_probe(kernels, cache)["from_cache"] == [True]
 
 
-# programs of no scene features, each compiling in about a second
-_PROGRAMS = [("device/primitives.cl", {}), ("photons/photon_reweight.cl", {}), ("accel/point_tree_build.cl", {}),
-             ("gi/cache/grid.cl", {})]
+# programs of no scene features, none of them bundled, each compiling in about a second
+_PROGRAMS = [("photons/photon_reweight.cl", {}), ("accel/kdtree_overlay.cl", {}), *outliers.programs(),
+             *interpolation.programs()[:1]]
 
 
 def _fresh_build(device, tmp_path, monkeypatch):

@@ -55,3 +55,26 @@ def test_renders_of_other_sizes_compile_no_kernel_and_no_work_group_variant(tmp_
     second = _render(tmp_path, 25)
     assert "compiling kernels" not in second.stderr
     assert _compiled_files(tmp_path / "pocl") == files_after_first
+
+
+_WIDE_LAUNCHES = """
+import sys
+import numpy as np
+from gpu_core.device import get_device, primitives
+device = get_device("cpu")
+for n in (1000, 65536, 300001):
+    got = device.read(primitives.iota(device, n), n, np.int32)
+    if not np.array_equal(got, np.arange(n, dtype=np.int32)):
+        sys.exit(f"iota of {n} wrong")
+"""
+
+
+def test_launches_past_65536_work_items_index_every_item_and_add_no_work_group_variant(tmp_path):
+    # PoCL compiles a second work-group function of a kernel launched 65,536
+    # work-items wide or wider: launches are grids of narrower rows
+    env = dict(os.environ, POCL_CACHE_DIR=str(tmp_path / "pocl"), GPUGI_KERNEL_CACHE=str(tmp_path / "kernels"))
+    run = subprocess.run([sys.executable, "-c", _WIDE_LAUNCHES], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    iota = [path for path in (tmp_path / "pocl").glob("*/*/Prim_iota/*") if path.is_dir()]
+    assert len(iota) == 1, iota

@@ -5,6 +5,7 @@
  * (gpu_core/gi/cache/clusters.py). The tree is built once over the seeds; as
  * the centres move, each node's box is refit to the centres it holds, which
  * is all the search needs to stay exact. */
+#include "device/launch.h"
 #include "gi/cache/cache.h"
 #include "accel/point_tree.h"
 
@@ -12,7 +13,7 @@
 __kernel void Cache_seed_centres(const __global int *seeds, const int k, const __global float4 *pos,
                                  const __global float4 *nrm, __global float4 *cpos,
                                  __global float4 *cnrm) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= k) return;
     cpos[c] = pos[seeds[c]];
     cnrm[c] = nrm[seeds[c]];
@@ -22,7 +23,7 @@ __kernel void Cache_seed_centres(const __global int *seeds, const int k, const _
  * at box[2t], hi at box[2t + 1]; +-INFINITY for an empty node. */
 __kernel void Cache_tree_boxes(POINT_TREE_PARAMS, const __global PointNode *pt_info, const int node_count,
                                const __global float4 *cpos, __global float4 *box) {
-    int t = get_global_id(0);
+    int t = Launch_global_id();
     if (t >= node_count) return;
     float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
     int end = pt_info[t].first + pt_info[t].count;
@@ -158,7 +159,7 @@ __kernel void Cache_assign(const __global float4 *pos, const __global float4 *nr
                            const __global float4 *cpos, const __global float4 *cnrm, POINT_TREE_PARAMS,
                            const __global float4 *box, const float alpha, __global int *cluster,
                            volatile __global int *counts) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     float3 x = pos[i].xyz, nx = nrm[i].xyz;
     int prev = cluster[i];
@@ -202,7 +203,7 @@ __kernel void Cache_update_centres(const __global int *start, const __global int
                                    const __global int *order, const __global float4 *pos,
                                    const __global float4 *nrm, const int k,
                                    __global float4 *cpos, __global float4 *cnrm) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= k || end[c] <= start[c]) return;
     float3 ps = (float3)(0.0f), ns = (float3)(0.0f);
     for (int j = start[c]; j < end[c]; ++j) {
@@ -222,7 +223,7 @@ __kernel void Cache_pick_samples(const __global int *start, const __global int *
                                  const __global float4 *nrm, const int k,
                                  const __global float4 *cpos, const __global float4 *cnrm,
                                  const float alpha, __global int *sample) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= k) return;
     float3 cx = cpos[c].xyz, cn = cnrm[c].xyz;
     float best_e = FLT_MAX;
@@ -247,7 +248,7 @@ __kernel void Cache_worst_members(const __global int *start, const __global int 
                                   const __global float4 *nrm, const int k,
                                   const __global float4 *cpos, const __global float4 *cnrm,
                                   const float alpha, __global int *worst, __global float *worst_e) {
-    int c = get_global_id(0);
+    int c = Launch_global_id();
     if (c >= k) return;
     int pick = -1;
     float pick_e = 0.0f;
@@ -270,7 +271,7 @@ __kernel void Cache_worst_members(const __global int *start, const __global int 
 __kernel void Cache_move_centres(const __global int *clusters, const __global int *points, const int t_count,
                                  const __global float4 *pos, const __global float4 *nrm,
                                  __global float4 *cpos, __global float4 *cnrm) {
-    int t = get_global_id(0);
+    int t = Launch_global_id();
     if (t >= t_count) return;
     cpos[clusters[t]] = pos[points[t]];
     cnrm[clusters[t]] = nrm[points[t]];

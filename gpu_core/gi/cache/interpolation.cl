@@ -8,6 +8,7 @@
  * own, on each level in use. Points no sample covers take the nearest
  * sample with a compatible normal, else the nearest one
  * (gpu_core/gi/cache/interpolation.py). */
+#include "device/launch.h"
 #include "gi/cache/cache.h"
 
 /* Cell sizes 2, 1, 1/2, ... 2^-16 (normalised units): the finest cells stay
@@ -42,7 +43,7 @@ inline uint Cache_bucket(int4 cell, uint mask) {
 __kernel void Cache_prepare_samples(const __global float4 *spos, const __global float *srad, const int m,
                                     const float4 centre_high, const float4 centre_low, const float extent,
                                     const float a, __global float4 *out_pos, __global float *out_rad) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= m) return;
     float r = srad[j] / extent;
     r = isnan(r) ? CACHE_MIN_R : clamp(r, CACHE_MIN_R, CACHE_MAX_R);
@@ -58,7 +59,7 @@ __kernel void Cache_prepare_samples(const __global float4 *spos, const __global 
 __kernel void Cache_sample_cells(const __global float4 *spos, const int m, const uint mask,
                                  __global int4 *cells, __global uint *keys,
                                  volatile __global uint *levels) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= m) return;
     float4 s = spos[j];
     int g = Cache_level(s.w);
@@ -165,7 +166,7 @@ inline int Cache_nearest_sample(const __global float4 *spos, const __global floa
 __kernel void Cache_interpolate(const __global float4 *pos, const __global float4 *nrm, const int n,
                                 CACHE_HASH_PARAMS, CACHE_GRID_PARAMS, const int m, const float behind,
                                 __global float4 *out, __global int *flag) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     float3 x = pos[i].xyz, nx = nrm[i].xyz;
     float wsum;
@@ -185,12 +186,12 @@ __kernel void Cache_interpolate(const __global float4 *pos, const __global float
 
 /* Flag 0..3 as a one-hot int4, for the host's count of each. */
 __kernel void Cache_flag_one_hot(const __global int *flag, const int n, __global int4 *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = (int4)(flag[i] == 0, flag[i] == 1, flag[i] == 2, flag[i] == 3);
 }
 
 /* 1 where a point is not covered by any sample (flag other than 1). */
 __kernel void Cache_uncovered(const __global int *flag, const int n, __global int *out) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i < n) out[i] = flag[i] != 1;
 }

@@ -2,6 +2,7 @@
  * luminance of their OUTLIER_NEIGHBOURS nearest samples (gpu_core/gi/cache/
  * outliers.py). Built with KNN_K = OUTLIER_NEIGHBOURS + 1 (the sample itself
  * comes first). */
+#include "device/launch.h"
 #include "accel/point_tree_knn.h"
 #include "device/sampling.h"
 
@@ -22,7 +23,7 @@ inline float Outliers_median(float *v, int n) {
  * where its luminance exceeds it. `clamped` counts them. */
 __kernel void Outliers_clamp(POINT_TREE_PARAMS, const __global float4 *positions, const __global float4 *irradiance,
                              const int m, __global float4 *out, volatile __global int *clamped) {
-    int j = get_global_id(0);
+    int j = Launch_global_id();
     if (j >= m) return;
     PointTree tree = POINT_TREE_MAKE();
     Knn h;

@@ -2,6 +2,7 @@
  * position and normal, the mean error of its shading points to that mean,
  * and the seed budget handed down in proportion to error. Levels are dense
  * row-major grids of nodes; level L is the leaf level (gpu_core/gi/cache/seeding.py). */
+#include "device/launch.h"
 #include "gi/cache/cache.h"
 
 /* Mean position and unit mean normal of a node (normal 0 when the normals
@@ -15,7 +16,7 @@ inline void Cache_node_mean(float4 psum, float4 nsum, int count, float3 *x, floa
 /* keys[i] = leaf cell of the pixel of shading point i. */
 __kernel void Cache_leaf_keys(const __global int2 *pixels, const int n, const int shift,
                               const int leaf_w, __global uint *keys) {
-    int i = get_global_id(0);
+    int i = Launch_global_id();
     if (i >= n) return;
     int2 p = pixels[i];
     keys[i] = (uint)((p.y >> shift) * leaf_w + (p.x >> shift));
@@ -26,7 +27,7 @@ __kernel void Cache_leaf_sums(const __global int *start, const __global int *end
                               const __global int *order, const __global float4 *pos,
                               const __global float4 *nrm, const int cells,
                               __global float4 *psum, __global float4 *nsum, __global int *count) {
-    int k = get_global_id(0);
+    int k = Launch_global_id();
     if (k >= cells) return;
     float4 ps = (float4)(0.0f), ns = (float4)(0.0f);
     for (int j = start[k]; j < end[k]; ++j) {
@@ -44,7 +45,7 @@ __kernel void Cache_pyramid_sums(const __global float4 *child_psum, const __glob
                                  const __global int *child_count, const int2 child_dims,
                                  __global float4 *psum, __global float4 *nsum, __global int *count,
                                  const int2 dims) {
-    int k = get_global_id(0);
+    int k = Launch_global_id();
     if (k >= dims.x * dims.y) return;
     int x = k % dims.x, y = k / dims.x;
     float4 ps = (float4)(0.0f), ns = (float4)(0.0f);
@@ -72,7 +73,7 @@ __kernel void Cache_leaf_error(const __global int *start, const __global int *en
                                const __global float4 *psum, const __global float4 *nsum,
                                const __global int *count, const int2 dims, const int up,
                                const float alpha, __global float *err) {
-    int k = get_global_id(0);
+    int k = Launch_global_id();
     if (k >= leaf_dims.x * leaf_dims.y) return;
     int a = ((k / leaf_dims.x) >> up) * dims.x + ((k % leaf_dims.x) >> up);
     float3 mx, mn;
@@ -88,7 +89,7 @@ __kernel void Cache_leaf_error(const __global int *start, const __global int *en
 /* A parent node's error sum from its children's. */
 __kernel void Cache_pyramid_error(const __global float *child_err, const int2 child_dims,
                                   __global float *err, const int2 dims) {
-    int k = get_global_id(0);
+    int k = Launch_global_id();
     if (k >= dims.x * dims.y) return;
     int x = k % dims.x, y = k / dims.x;
     float e = 0.0f;
@@ -111,7 +112,7 @@ __kernel void Cache_distribute(const __global int *budget, const int2 dims,
                                const __global int *child_count, const __global float *child_err,
                                const int2 child_dims, __global int *child_budget,
                                const uint seed, const int level) {
-    int k = get_global_id(0);
+    int k = Launch_global_id();
     if (k >= dims.x * dims.y) return;
     int x = k % dims.x, y = k / dims.x;
     int id[4], cap[4], got[4];
@@ -195,7 +196,7 @@ __kernel void Cache_leaf_seeds(const __global int *start, const __global int *en
                                const __global float4 *nsum, const __global int *count,
                                const __global int *budget, const __global int *offset,
                                const int cells, const float alpha, __global int *seeds) {
-    int k = get_global_id(0);
+    int k = Launch_global_id();
     if (k >= cells || budget[k] == 0) return;
     float3 mx, mn;
     Cache_node_mean(psum[k], nsum[k], count[k], &mx, &mn);
