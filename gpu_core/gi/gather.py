@@ -78,7 +78,8 @@ def gather(device: Device, buffers: SceneBuffers, positions: cl.Buffer, normals:
     for first in range(0, m, per_launch):
         count = min(per_launch, m - first)
         kernel.groups(count, group, *buffers.kernel_args(), *cut.kernel_args(), positions, normals, np.int32(first),
-                      np.int32(first + count), np.int32(strata), np.int32(max_specular), np.uint32(seed & 0xFFFFFFFF), e, distance, hits)
+                      np.int32(first + count), np.int32(strata), np.int32(max_specular), np.uint32(seed & 0xFFFFFFFF),
+                      e, distance, hits)
         if should_stop is not None and first + count < m:
             device.queue.finish()
             check_stop(should_stop)
