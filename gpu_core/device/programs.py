@@ -131,6 +131,13 @@ def built_as(name: str, defines: dict | None = None) -> str:
     return BUNDLE if name in BUNDLED and not defines else name
 
 
+def _distinct(wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
+    """The (program, defines) builds ``wanted`` asks for, each once, in
+    order, bundled programs named by their bundle."""
+    keys = dict.fromkeys((built_as(n, d), tuple(sorted((d or {}).items()))) for n, d in wanted)
+    return [(n, dict(d)) for n, d in keys]
+
+
 def device_spec(device: cl.Device) -> str | None:
     """``P:D``, the platform and device numbers get_device takes, of ``device``."""
     try:
@@ -246,9 +253,8 @@ class Programs:
     def missing(self, wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
         """The (name, defines) of ``wanted`` neither built here nor in the disk
         cache, bundled programs named by their bundle (built_as)."""
-        wanted = list(dict.fromkeys((built_as(n, d), tuple(sorted((d or {}).items()))) for n, d in wanted))
-        return [(n, dict(d)) for n, d in wanted if (n, build_options(dict(d))) not in self._programs
-                and not self._cache_entry(n, build_options(dict(d)))[2].is_file()]
+        return [(n, d) for n, d in _distinct(wanted) if (n, build_options(d)) not in self._programs
+                and not self._cache_entry(n, build_options(d))[2].is_file()]
 
     def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None,
                   busy: int = 0) -> None:
@@ -258,8 +264,7 @@ class Programs:
         cores not taken by this process and ``busy`` others);
         ``progress(compiled, to_compile)`` after each one that is not in the
         disk cache (loading one reports nothing)."""
-        todo = list(dict.fromkeys((built_as(name, d), tuple(sorted((d or {}).items()))) for name, d in wanted))
-        todo = [(n, dict(d)) for n, d in todo if (n, build_options(dict(d))) not in self._programs]
+        todo = [(n, d) for n, d in _distinct(wanted) if (n, build_options(d)) not in self._programs]
         if not todo:
             return
         missing = self.missing(todo)
