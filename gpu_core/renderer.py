@@ -28,7 +28,8 @@ from .gi.cache.samples import HeldSamples
 from .gi.pipeline import GiField, render_gi
 from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.reweight import reweight_maps
-from .photons.trace import PhotonMaps, PhotonSettings, trace_maps
+from .photons.aim import caustic_boxes
+from .photons.trace import PhotonMaps, PhotonSettings, trace_maps, traced_maps
 from .plan import Held, Plan, plan
 from .scene.model import Scene
 from .scene.upload import SceneBuffers, upload
@@ -121,7 +122,7 @@ class Renderer:
             if say is not None and the_plan.traces_photons:
                 say("photons")
             with timer.stage("photons"):
-                maps = self._photon_maps(the_plan, settings)
+                maps = self._photon_maps(scene, the_plan, settings)
             check_stop(should_stop)
             field_ = self._gi_cache(scene, settings, the_plan, maps, timer, should_stop, say)
             check_stop(should_stop)
@@ -154,9 +155,10 @@ class Renderer:
         self._held.tables = the_plan.tables
         self._unsynced = set()
 
-    def _photon_maps(self, the_plan: Plan, settings: RenderSettings) -> PhotonMaps:
-        """The plan's photon maps: traced, or the ones held when it says they
-        are reused, or those reweighted for the lights' new power."""
+    def _photon_maps(self, scene: Scene, the_plan: Plan, settings: RenderSettings) -> PhotonMaps:
+        """The plan's photon maps: traced (caustic photons aimed at the
+        surfaces that can bounce them specularly), or the ones held when it
+        says they are reused, or those reweighted for the lights' new power."""
         if the_plan.photons_reused and self._maps is not None:
             return self._maps
         held, maps = self._held, self._maps
@@ -166,8 +168,10 @@ class Renderer:
         else:
             photon_settings = PhotonSettings(*the_plan.photon_counts, settings.seed, settings.photon_k,
                                              settings.max_bounces)
+            aim = (caustic_boxes(scene, the_plan.tables.materials) if "caustic" in traced_maps(the_plan.photon_maps)
+                   else None)
             maps = trace_maps(self.device, self._buffers, the_plan.emitters, the_plan.photon_maps, photon_settings,
-                              the_plan.scene_defines)
+                              the_plan.scene_defines, aim)
         self._maps = maps
         held.photon_key, held.photon_emitters = the_plan.photon_key, the_plan.emitters
         held.photon_lights = the_plan.tables.lights.copy()

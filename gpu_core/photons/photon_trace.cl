@@ -18,7 +18,12 @@
  * sizes the buffers from a first launch over every `step`-th photon). Each
  * also gets a key, photon index x stride + its stores so far, by which the
  * host puts them in an order that does not depend on the scheduling
- * (Photon_reorder): the same scene gives the same photon maps. A photon's
+ * (Photon_reorder): the same scene gives the same photon maps. The caustic
+ * pass traces only the photons whose first ray meets one of the n_aim
+ * boxes (every photon when n_aim is negative), which hold every surface
+ * that can bounce light specularly (photons/aim.py): any other photon
+ * would end its caustic path at its first hit with nothing stored, so the
+ * map is the same; counter[1] counts the photons skipped. A photon's
  * power carries the index of its emitter in w, so that a change of light
  * power alone reweights the maps instead (photon_reweight.cl). */
 #include "device/launch.h"
@@ -62,11 +67,24 @@ inline void Photon_store(float3 p, float3 incident, float3 power, int emitter, f
     out_normal[slot] = (float4)(n, 0.0f);
 }
 
+/* Whether the ray org + t dir, t >= 0, meets one of the n boxes (low and
+ * high corners in turn). A plane the ray runs in gives NaN distances,
+ * which fmin and fmax pass over: that axis does not bound it. */
+inline bool Photon_aimed(const __global float4 *aim, int n, float3 org, float3 dir) {
+    float3 inv = 1.0f / dir;
+    for (int b = 0; b < n; ++b) {
+        float3 t0 = (aim[2 * b].xyz - org) * inv, t1 = (aim[2 * b + 1].xyz - org) * inv;
+        float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
+        if (fmax(fmax(lo.x, lo.y), fmax(lo.z, 0.0f)) <= fmin(fmin(hi.x, hi.y), hi.z)) return true;
+    }
+    return false;
+}
+
 /* One photon path per work item: photon i = step x the work item's index.
  * path_out[i] = (emitted power rgb, surface hits of the path), for the
  * host's statistics. */
 __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters, const int n_emitters,
-                           const float4 sphere, const int n_photons, const uint seed, const int pass,
+                           const float4 sphere, const __global float4 *aim, const int n_aim, const int n_photons, const uint seed, const int pass,
                            const int max_bounces, const int max_specular, volatile __global int *counter,
                            const int capacity, __global float4 *out_pos, __global float4 *out_dir,
                            __global float4 *out_power, __global float4 *out_normal, __global uint *out_key,
@@ -81,6 +99,10 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
     float3 org = ray.org, dir = ray.dir, power = ray.power;
     path_out[i] = (float4)(power, 0.0f);
     if (!(power.x > 0.0f || power.y > 0.0f || power.z > 0.0f)) return;
+    if (pass == PHOTON_PASS_CAUSTIC && n_aim >= 0 && !Photon_aimed(aim, n_aim, org, dir)) {
+        atomic_inc(&counter[1]);
+        return;
+    }
 
     int hits = 0, bounces = 0, specular = 0, passes = 0;
     uint stores = 0;

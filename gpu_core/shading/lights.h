@@ -148,11 +148,14 @@ inline bool Light_rect_from(const Light *l, float3 x, LightRect *r) {
 }
 
 /* Rectangle light: a direction uniform in its solid angle, by inverting
- * the solid angle cumulative along x, then along y. */
+ * the solid angle cumulative along x, then along y. The angle's cosine and
+ * sine are the native functions, as in Sampling_turn: they move a sampled
+ * direction by far less than its noise, and the accurate pair (with its
+ * argument reduction) took 6% of a Cornell-box image on PoCL. */
 inline void Light_sample_rect_solid_angle(const Light *l, const LightRect *r, float3 x, float u1, float u2,
                                           LightSample *s) {
     float au = u1 * r->solid + PI_F - r->a[2] - r->a[3];
-    float fu = (cos(au) * r->nz[0] - r->nz[2]) / sin(au);
+    float fu = (native_cos(au) * r->nz[0] - r->nz[2]) / native_sin(au);
     float cu = clamp(copysign(1.0f, fu) / sqrt(fu * fu + r->nz[0] * r->nz[0]), -1.0f, 1.0f);
     float z0 = r->z0;
     float xu = clamp(-(cu * z0) / fmax(sqrt(1.0f - cu * cu), 1e-7f), r->x0, r->x1);
