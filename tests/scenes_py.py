@@ -27,6 +27,23 @@ def quad(center, size, normal_axis=2, flip=False) -> np.ndarray:
     return tris
 
 
+def sphere(center, radius, rings=12, segments=24):
+    """Triangles of a UV sphere, wound outwards."""
+    theta = np.linspace(0, np.pi, rings + 1)
+    phi = np.linspace(0, 2 * np.pi, segments + 1)
+    p = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.outer(np.sin(theta), np.sin(phi)),
+                  np.outer(np.cos(theta), np.ones_like(phi))], axis=-1) * radius + center
+    tris = []
+    for i in range(rings):
+        for j in range(segments):
+            a, b, c, d = p[i, j], p[i + 1, j], p[i + 1, j + 1], p[i, j + 1]
+            if i > 0:
+                tris.append([a, b, d])
+            if i < rings - 1:
+                tris.append([b, c, d])
+    return np.array(tris)
+
+
 def camera_looking_down(height=4.0, half_width=1.0, size=32, ortho=False, center=(0.0, 0.0)) -> Camera:
     """A camera at (cx, cy, height) looking down -Z; the image covers
     [-half_width, half_width]^2 around the centre on the plane z = 0."""

@@ -4,8 +4,7 @@ triangles, and a caustic map that is the same whether or not the photons
 that meet none of the boxes are traced."""
 
 import numpy as np
-from scenes_py import make_scene, plane_scene, quad
-from test_photon_maps import sphere
+from scenes_py import make_scene, plane_scene, quad, sphere
 
 from gpu_core.photons import trace_photon_maps
 from gpu_core.photons.aim import MAX_BOXES, caustic_boxes, device_boxes, specular_rows

@@ -4,7 +4,7 @@ extreme light powers."""
 
 import numpy as np
 import pytest
-from scenes_py import camera_looking_down, make_scene, plane_scene, quad
+from scenes_py import camera_looking_down, make_scene, plane_scene, quad, sphere
 
 from gpu_core.photons import trace as photon_trace
 from gpu_core.photons import trace_photon_maps
@@ -24,23 +24,6 @@ def closed_box(albedo, lights, size=2.0):
     tris = np.concatenate(faces)
     mats = Materials.make([dict(base_color=(albedo,) * 3)])
     return make_scene(tris, np.zeros(len(tris), np.int32), mats, lights, plane_scene(lights).camera)
-
-
-def sphere(center, radius, rings=12, segments=24):
-    """Triangles of a UV sphere, wound outwards."""
-    theta = np.linspace(0, np.pi, rings + 1)
-    phi = np.linspace(0, 2 * np.pi, segments + 1)
-    p = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.outer(np.sin(theta), np.sin(phi)),
-                  np.outer(np.cos(theta), np.ones_like(phi))], axis=-1) * radius + center
-    tris = []
-    for i in range(rings):
-        for j in range(segments):
-            a, b, c, d = p[i, j], p[i + 1, j], p[i + 1, j + 1], p[i, j + 1]
-            if i > 0:
-                tris.append([a, b, d])
-            if i < rings - 1:
-                tris.append([b, c, d])
-    return np.array(tris)
 
 
 def irradiance(maps, points, k=100):
