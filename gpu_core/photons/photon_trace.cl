@@ -84,7 +84,8 @@ inline bool Photon_aimed(const __global float4 *aim, int n, float3 org, float3 d
  * path_out[i] = (emitted power rgb, surface hits of the path), for the
  * host's statistics. */
 __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters, const int n_emitters,
-                           const float4 sphere, const __global float4 *aim, const int n_aim, const int n_photons, const uint seed, const int pass,
+                           const float4 sphere, const __global float4 *aim, const int n_aim, const int n_photons,
+                           const uint seed, const int pass,
                            const int max_bounces, const int max_specular, volatile __global int *counter,
                            const int capacity, __global float4 *out_pos, __global float4 *out_dir,
                            __global float4 *out_power, __global float4 *out_normal, __global uint *out_key,
