@@ -2,9 +2,9 @@
 can bounce light specularly, as photon tracing counts a bounce specular
 (photon_trace.cl: a singular lobe, or a glossy one below
 CAUSTIC_ROUGHNESS). A caustic photon whose first ray meets none of the
-boxes hits a surface that ends its caustic path at once, storing nothing
-(or nothing at all), so the caustic pass does not trace it: the map is the
-one it would be, and only the photons that can make a caustic cost a ray
+boxes hits nothing, or a surface that ends its caustic path at once with
+nothing stored, so the caustic pass does not trace it: the map is the one
+it would be, and only the photons that can make a caustic cost a ray
 (Jensen's projection maps aim the photons instead, which changes the map).
 """
 
