@@ -276,14 +276,17 @@ class _Builds:
     """Every program a render needs, built before any stage runs, in a
     background thread (in parallel where the driver allows) while the
     render's own thread reports progress ("compiling kernels 3/9") and sees
-    a request to stop; the builder's thread never calls back."""
+    a request to stop; the builder's thread never calls back. No thread
+    when every program is built already: nothing to wait for or poll."""
 
     def __init__(self, device: Device, programs: list, busy: int = 0):
         self._error: GpuGiError | None = None
         self._done, self._total = 0, 0
-        self._thread = threading.Thread(target=self._run, args=(device, programs, busy), name="gpugi-builds",
-                                        daemon=True)
-        self._thread.start()
+        self._thread = None
+        if device.programs.unbuilt(programs):
+            self._thread = threading.Thread(target=self._run, args=(device, programs, busy), name="gpugi-builds",
+                                            daemon=True)
+            self._thread.start()
 
     def _run(self, device: Device, programs: list, busy: int) -> None:
         def count(done: int, total: int) -> None:
@@ -296,6 +299,8 @@ class _Builds:
     def join(self, progress=None, should_stop=None) -> None:
         """Wait for every build, reporting the count as it changes and
         seeing a request to stop; a build's error is raised here."""
+        if self._thread is None:
+            return
         reported = None
         while self._thread.is_alive() or reported not in (None, self._done):
             self._thread.join(0.1)

@@ -256,6 +256,11 @@ class Programs:
         return [(n, d) for n, d in _distinct(wanted) if (n, build_options(d)) not in self._programs
                 and not self._cache_entry(n, build_options(d))[2].is_file()]
 
+    def unbuilt(self, wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
+        """The (name, defines) of ``wanted`` not built in this process yet,
+        bundled programs named by their bundle (built_as)."""
+        return [(n, d) for n, d in _distinct(wanted) if (n, build_options(d)) not in self._programs]
+
     def build_all(self, wanted: list[tuple[str, dict]], progress: Callable[[int, int], None] | None = None,
                   busy: int = 0) -> None:
         """Build every (name, defines) in ``wanted`` that is not built yet, in
@@ -264,7 +269,7 @@ class Programs:
         cores not taken by this process and ``busy`` others);
         ``progress(compiled, to_compile)`` after each one that is not in the
         disk cache (loading one reports nothing)."""
-        todo = [(n, d) for n, d in _distinct(wanted) if (n, build_options(d)) not in self._programs]
+        todo = self.unbuilt(wanted)
         if not todo:
             return
         missing = self.missing(todo)

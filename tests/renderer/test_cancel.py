@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import time
 
 import numpy as np
 import pytest
 from test_threads import GI as GI_REUSING, scene
 
+from gpu_core.device.programs import Programs
 from gpu_core.errors import RenderCancelled
 from gpu_core.gi import gather
 from gpu_core.renderer import Renderer
@@ -41,6 +43,24 @@ def test_every_gi_stage_and_gather_batch_is_followed_by_a_poll(device, monkeypat
     assert one_batch >= 9
     monkeypatch.setattr(gather, "_RAYS_PER_LAUNCH", 16 * 20)  # 20 cache points per batch: 4 batches
     assert _polls(renderer, the_scene, GI) == one_batch + 3
+
+
+def test_a_render_whose_programs_are_built_waits_for_no_build(device, monkeypatch):
+    """The builds are not waited for (nor polled for) when nothing is left to
+    build, however long a look at the programs would take: the polls of a
+    render do not depend on how fast a thread starts."""
+    the_scene = scene(True, 20)
+    renderer = Renderer(device)
+    renderer.render(the_scene, GI)
+    polls = _polls(renderer, the_scene, OTHER)
+    build_all = Programs.build_all
+
+    def slow_build_all(self, *args, **kwargs):
+        time.sleep(0.3)
+        return build_all(self, *args, **kwargs)
+
+    monkeypatch.setattr(Programs, "build_all", slow_build_all)
+    assert _polls(renderer, the_scene, GI) == polls
 
 
 def test_stopping_at_any_poll_cancels_and_the_next_render_is_unchanged(device):
