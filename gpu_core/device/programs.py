@@ -46,7 +46,13 @@ _GENERATED: dict[str, Callable[[], str]] = {
 BUNDLE = "device/bundle.cl"
 BUNDLED = ("device/primitives.cl", "accel/point_tree_build.cl", "gi/cache/frame.cl", "gi/cache/seeding.cl",
            "gi/cache/clusters.cl", "gi/cache/grid.cl")
-_GENERATED[BUNDLE] = lambda: "".join(f'#include "{name}"\n' for name in BUNDLED)
+# Likewise the two tracing programs that take the scene's defines and no
+# others, photon tracing and the shading points: each parses the whole of
+# the shading code besides the header.
+SCENE_BUNDLE = "device/scene_bundle.cl"
+SCENE_BUNDLED = ("photons/photon_trace.cl", "gi/shading_points.cl")
+for _bundle, _members in ((BUNDLE, BUNDLED), (SCENE_BUNDLE, SCENE_BUNDLED)):
+    _GENERATED[_bundle] = lambda members=_members: "".join(f'#include "{name}"\n' for name in members)
 _OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
 _CACHE_FORMAT = "3"
 # platforms whose program builds must not run in parallel threads, nor
@@ -127,8 +133,12 @@ def load_source(name: str) -> str:
 
 def built_as(name: str, defines: dict | None = None) -> str:
     """The program that holds program ``name`` built with ``defines``: the
-    bundle for a bundled program without defines, else ``name`` itself."""
-    return BUNDLE if name in BUNDLED and not defines else name
+    bundle for a bundled program without defines, the scene bundle for a
+    program of SCENE_BUNDLED (built with the scene's defines it is asked
+    with), else ``name`` itself."""
+    if name in BUNDLED and not defines:
+        return BUNDLE
+    return SCENE_BUNDLE if name in SCENE_BUNDLED else name
 
 
 def _distinct(wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:

@@ -175,6 +175,21 @@ def test_programs_without_defines_of_their_own_are_built_as_one_bundle(device, t
     assert alone is not bundle and [k.function_name for k in alone.all_kernels()] == ["Cache_grid_keys"]
 
 
+def test_the_tracing_programs_asked_for_with_the_same_scene_defines_are_built_as_one(device, tmp_path, monkeypatch):
+    monkeypatch.setenv("GPUGI_KERNEL_CACHE", str(tmp_path / "cache"))
+    programs = programs_module.Programs(device.context, device.device)
+    scene = {"SCENE_HAS_MIX": 1}
+    programs.build_all([(name, scene) for name in programs_module.SCENE_BUNDLED])
+    assert [r.name for r in programs.builds] == [programs_module.SCENE_BUNDLE]
+    bundle = programs.get("gi/shading_points.cl", scene)
+    assert programs.get("photons/photon_trace.cl", scene) is bundle
+    assert {"Photon_trace", "ShadingPoints_trace"} <= {k.function_name for k in bundle.all_kernels()}
+    # another scene's defines: another build of the bundle, both programs again
+    other = programs.get("photons/photon_trace.cl", {})
+    assert other is not bundle and "ShadingPoints_trace" in {k.function_name for k in other.all_kernels()}
+    assert [r.name for r in programs.builds] == [programs_module.SCENE_BUNDLE] * 2
+
+
 def test_second_process_loads_the_program_from_the_disk_cache(tmp_path):
     kernels = _kernel_dir(tmp_path / "kernels")
     cache = tmp_path / "cache"
