@@ -93,26 +93,35 @@ def test_building_each_program_when_first_needed_renders_the_same_image(device):
     np.testing.assert_array_equal(lazily, Renderer(device).render(the_scene, GI).passes["Combined"])
 
 
-def test_the_helper_runs_the_image_stage_ahead_once_its_copy_reaches_gathering(device, monkeypatch):
-    from gpu_core import image
+def test_the_helper_runs_the_stages_that_need_no_photon_map_before_its_render(device, monkeypatch):
+    from gpu_core import renderer
+    from gpu_core.gi import shading_points
+    from gpu_core.gi.cache import samples
 
-    calls, said = [], []
-    render_image = image.render_image
+    events = []
 
-    def recording(dev, buffers, the_scene, settings, defines, gi_field=None, *args, **kwargs):
-        empty = not dev.read(gi_field.positions, (warmup.SIDE ** 2, 4), np.float32).any()
-        calls.append((said[-1] if said else None, empty, dict(defines)))
-        return render_image(dev, buffers, the_scene, settings, defines, gi_field, *args, **kwargs)
+    def recorded(module, name, event):
+        original = getattr(module, name)
 
-    monkeypatch.setattr(image, "render_image", recording)
-    monkeypatch.setattr("gpu_core.renderer.render_image", recording)
-    original = warmup.image_ahead
-    monkeypatch.setattr(warmup, "image_ahead", lambda *a: (said.append(warmup.IMAGE_AHEAD_AT), original(*a)))
-    small = warmup.small_copy(scene(True, 32), GI)
-    warmup.render_small_copy(device, *small)
-    # first over an empty GI field, at gathering, with the render's defines; then the render's own
-    image_defines = plan(validate(small[0]), small[1], None, None, device).image_defines
-    assert calls == [(warmup.IMAGE_AHEAD_AT, True, image_defines), (warmup.IMAGE_AHEAD_AT, False, image_defines)]
+        def wrapper(*args, **kwargs):
+            events.append(event(args, kwargs) if callable(event) else event)
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(module, name, wrapper)
+
+    def image(args, kwargs):
+        dev, field = args[0], args[5]  # render_image(device, buffers, scene, settings, defines, gi_field, ...)
+        empty = not dev.read(field.positions, (warmup.SIDE ** 2, 4), np.float32).any()
+        return "image, empty field" if empty else "image"
+
+    recorded(renderer, "trace_maps", "photons")
+    recorded(shading_points, "trace", "shading points")
+    recorded(samples, "select", "cache points")
+    recorded(warmup, "render_image", image)
+    recorded(renderer, "render_image", image)
+    warmup.render_small_copy(device, *warmup.small_copy(scene(True, 32), GI))
+    assert events[:4] == ["shading points", "cache points", "image, empty field", "photons"]
+    assert events[-1] == "image"
 
 
 def test_the_helper_module_renders_a_pickled_small_copy(device):
