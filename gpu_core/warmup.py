@@ -11,12 +11,12 @@ builds its programs, the helper compiles the first stages' work-group
 functions, and stays ahead, so the render finds them in PoCL's cache.
 The render, once its programs are built, catches the helper up in its
 photon stage, and walking the same stages the two would compile the same
-kernels from there on; so the helper first runs the stages that need no
-photon map (the shading points, their cache points, and the image over an
-empty GI field), compiling them while the render compiles its photon
-stage, and only then its copy's render (on two cores a first frame
-16.6-17.5 s, against 17.7-19.1 s with only the image run ahead, at
-gathering). The helper changes nothing the render computes; a helper
+kernels from there on; so the helper first runs what needs no photon
+map (the shading points, their cache points, the image over an empty GI
+field, and the interpolation and caustic estimate over stand-in records
+and photons), compiling it while the render compiles its photon stage,
+and only then its copy's render (on two cores a first frame 16.6-17.5 s,
+against 17.7-19.1 s with only the image run ahead, at gathering). The helper changes nothing the render computes; a helper
 that fails costs nothing but its core.
 
     python -m gpu_core.warmup P:D < pickle of (scene, settings)
@@ -30,10 +30,13 @@ import subprocess
 import sys
 from dataclasses import replace
 
+import numpy as np
+
+from .accel.point_tree import PointTree
 from .device import Device
 from .device.programs import compile_helpers, device_spec, start_helper, stop_helper
-from .gi import shading_points
-from .gi.cache import samples
+from .gi import cut, shading_points
+from .gi.cache import interpolation, outliers, samples
 from .gi.pipeline import GiField
 from .image import render_image
 from .plan import Held, plan
@@ -101,10 +104,12 @@ def render_small_copy(device: Device, scene: Scene, settings: RenderSettings) ->
 
 
 def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None:
-    """The stages of a GI render of ``scene`` that need no photon map, run
-    once on their own: its shading points, their cache points (where it
-    gathers) and its image over an empty GI field (no cache point
-    anywhere; not where glossy paths read the cut, which needs the maps)."""
+    """What a GI render of ``scene`` runs that needs no photon map, run once
+    on its own: its shading points, their cache points (where it gathers),
+    its image over an empty GI field (no cache point anywhere; not where
+    glossy paths read the cut, which needs the maps), the cache points'
+    outlier clamp and interpolation over dark stand-in records, and the
+    caustic estimate over a stand-in map (a photon at each shading point)."""
     settings = settings.validated()
     if settings.mode != "gi":
         return
@@ -114,14 +119,27 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
     window = scene.camera.pixel_window
     points = shading_points.trace(device, buffers, window, settings.max_bounces, settings.gi_subpixels,
                                   the_plan.scene_defines)
+    chosen = None
     if points.count and "final_gather" in the_plan.stages:
-        samples.select(device, points.pos, points.nrm, points.pixel, points.count, points.width, points.height,
-                       min(settings.cache_seeds, points.count), settings.cache_alpha, seed=settings.seed)
+        chosen = samples.select(device, points.pos, points.nrm, points.pixel, points.count, points.width,
+                                points.height, min(settings.cache_seeds, points.count), settings.cache_alpha,
+                                seed=settings.seed)
     if "glossy_cut" not in the_plan.stages:
         x0, y0, x1, y1 = window
         empty = device.zeros(16 * (x1 - x0) * (y1 - y0) * settings.gi_subpixels ** 2)
         render_image(device, buffers, scene, settings, the_plan.image_defines,
                      GiField(empty, empty, empty, empty, settings.gi_subpixels))
+    if chosen is not None and chosen.count:
+        m, dark = chosen.count, device.zeros(16 * chosen.count)
+        outliers.clamp_outliers(device, chosen.pos, dark, m)
+        interpolation.interpolate_on_device(device, chosen.pos, chosen.nrm, dark,
+                                            device.to_device(np.ones(m, np.float32)), m, points.pos, points.nrm,
+                                            points.count)
+    if points.count and "caustics" in the_plan.stages:
+        pos, nrm = points.positions, points.normals
+        stand_in = PointTree.build(device, pos, np.full_like(pos, 1e-3), nrm, nrm, k_hint=settings.photon_k)
+        cut.caustic_irradiance(stand_in, points.pos, points.nrm, points.count, settings.photon_k,
+                               device.empty(16 * points.count))
 
 if __name__ == "__main__":
     main()

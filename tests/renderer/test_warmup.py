@@ -95,8 +95,8 @@ def test_building_each_program_when_first_needed_renders_the_same_image(device):
 
 def test_the_helper_runs_the_stages_that_need_no_photon_map_before_its_render(device, monkeypatch):
     from gpu_core import renderer
-    from gpu_core.gi import shading_points
-    from gpu_core.gi.cache import samples
+    from gpu_core.gi import cut, shading_points
+    from gpu_core.gi.cache import interpolation, samples
 
     events = []
 
@@ -117,10 +117,13 @@ def test_the_helper_runs_the_stages_that_need_no_photon_map_before_its_render(de
     recorded(renderer, "trace_maps", "photons")
     recorded(shading_points, "trace", "shading points")
     recorded(samples, "select", "cache points")
+    recorded(interpolation, "interpolate_on_device", "interpolation")
+    recorded(cut, "caustic_irradiance", "caustics")
     recorded(warmup, "render_image", image)
     recorded(renderer, "render_image", image)
-    warmup.render_small_copy(device, *warmup.small_copy(scene(True, 32), GI))
-    assert events[:4] == ["shading points", "cache points", "image, empty field", "photons"]
+    warmup.render_small_copy(device, *warmup.small_copy(scene(True, 32), GI))  # a mirror: caustics too
+    assert events[:6] == ["shading points", "cache points", "image, empty field", "interpolation", "caustics",
+                          "photons"]
     assert events[-1] == "image"
 
 
