@@ -98,8 +98,8 @@ def main() -> int:
         sys.exit(f"no snapshot of {', '.join(missing)}: run bench/frame_snapshot.py save first")
     from machine import describe
 
-    lines = [describe(), f"{args.preset} at {args.size}², medians of {args.repeats} renders per turn, {args.rounds} rounds, "
-             f"turns alternating; this tree against {args.rev}"]
+    lines = [describe(), f"{args.preset} at {args.size}², medians of {args.repeats} renders per turn, "
+             f"{args.rounds} rounds, turns alternating; this tree against {args.rev}"]
     print("\n".join(lines), flush=True)
     with tempfile.TemporaryDirectory(prefix="gpugi-compare-") as scratch:
         base = os.path.join(scratch, "base")
