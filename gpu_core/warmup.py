@@ -126,8 +126,7 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
                                 points.height, min(settings.cache_seeds, points.count), settings.cache_alpha,
                                 seed=settings.seed)
     if "glossy_cut" not in the_plan.stages:
-        x0, y0, x1, y1 = window
-        empty = device.zeros(16 * (x1 - x0) * (y1 - y0) * settings.gi_subpixels ** 2)
+        empty = device.zeros(16 * points.grid_size)
         render_image(device, buffers, scene, settings, the_plan.image_defines,
                      GiField(empty, empty, empty, empty, settings.gi_subpixels))
     if chosen is not None and chosen.count:

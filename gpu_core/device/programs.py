@@ -263,8 +263,7 @@ class Programs:
     def missing(self, wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
         """The (name, defines) of ``wanted`` neither built here nor in the disk
         cache, bundled programs named by their bundle (built_as)."""
-        return [(n, d) for n, d in _distinct(wanted) if (n, build_options(d)) not in self._programs
-                and not self._cache_entry(n, build_options(d))[2].is_file()]
+        return [(n, d) for n, d in self.unbuilt(wanted) if not self._cache_entry(n, build_options(d))[2].is_file()]
 
     def unbuilt(self, wanted: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
         """The (name, defines) of ``wanted`` not built in this process yet,
