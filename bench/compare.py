@@ -2,8 +2,11 @@
 
     python bench/compare.py REV [--scenes cornell_box box_torus] [--preset preview]
                                 [--size 256] [--repeats 5] [--rounds 2] [--device cpu]
+                                [--tag TAG]
 
-Checks REV out in a temporary git worktree and renders the snapshots of
+Checks REV out in a temporary git worktree (or, where REV is a folder
+holding a ``gpu_core``, takes that tree as it is: a copy on a machine
+without git) and renders the snapshots of
 ``bench/frame_snapshot.py save`` (``.cache/snapshots/``) through each
 tree's own ``gpu_core``, alternating the two, ``--rounds`` times: each turn
 a fresh process, one warm-up render, then the median of ``--repeats`` of
@@ -13,7 +16,7 @@ spread between rounds of one side is not a change. Each turn prints the
 ``gpu_core`` it imported, so that the two sides are known to differ (a
 script that imports a module of this repository's ``bench/`` before
 ``gpu_core`` gets this tree's package whatever its working directory).
-Writes bench/results/compare_REV.txt.
+Writes bench/results/compare_REV[_TAG].txt (REV a folder: its name).
 """
 
 from __future__ import annotations
@@ -76,15 +79,34 @@ def summary(name: str, rows: list[dict]) -> str:
     return f"{name}: " + ", ".join(cells) + f" | GI stages {gi}"
 
 
+def compare(base: str, args) -> list[str]:
+    """Per scene, ``args.rounds`` rounds of a turn of ``base`` then one of
+    this tree; the two sides' summary lines."""
+    lines = []
+    for scene in args.scenes:
+        sides = {"base": [], "this": []}
+        for _ in range(args.rounds):
+            for side, tree in (("base", base), ("this", ROOT)):
+                row = turn(tree, args, scene)
+                if not os.path.realpath(row["gpu_core"]).startswith(os.path.realpath(tree)):
+                    sys.exit(f"the {side} turn imported {row['gpu_core']}, not the gpu_core of {tree}")
+                sides[side].append(row)
+        for side, rows in sides.items():
+            lines.append(summary(f"{scene} {side}", rows))
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("rev", nargs="?", help="the git revision to compare with")
+    parser.add_argument("rev", nargs="?", help="the git revision (or a folder holding a gpu_core) to compare with")
     parser.add_argument("--scenes", nargs="+", default=["cornell_box", "box_torus"])
     parser.add_argument("--preset", default="preview", choices=("draft", "preview", "final"))
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--device", default=None, help="OpenCL device spec (default: GPUGI_DEVICE, else the CPU)")
+    parser.add_argument("--tag", default="", help="suffix of the output file")
     parser.add_argument("--measure", metavar="TREE", help=argparse.SUPPRESS)
     parser.add_argument("--snapshot", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -101,25 +123,20 @@ def main() -> int:
     lines = [describe(), f"{args.preset} at {args.size}², medians of {args.repeats} renders per turn, "
              f"{args.rounds} rounds, turns alternating; this tree against {args.rev}"]
     print("\n".join(lines), flush=True)
-    with tempfile.TemporaryDirectory(prefix="gpugi-compare-") as scratch:
-        base = os.path.join(scratch, "base")
-        subprocess.run(["git", "-C", ROOT, "worktree", "add", "--detach", "-q", base, args.rev], check=True)
-        try:
-            for scene in args.scenes:
-                sides = {"base": [], "this": []}
-                for _ in range(args.rounds):
-                    for side, tree in (("base", base), ("this", ROOT)):
-                        row = turn(tree, args, scene)
-                        if not os.path.realpath(row["gpu_core"]).startswith(os.path.realpath(tree)):
-                            sys.exit(f"the {side} turn imported {row['gpu_core']}, not the gpu_core of {tree}")
-                        sides[side].append(row)
-                for side, rows in sides.items():
-                    lines.append(summary(f"{scene} {side}", rows))
-                    print(lines[-1], flush=True)
-        finally:
-            subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", base], check=False)
+    if os.path.isdir(os.path.join(args.rev, "gpu_core")):
+        lines += compare(os.path.abspath(args.rev), args)
+        name = os.path.basename(os.path.normpath(args.rev))
+    else:
+        with tempfile.TemporaryDirectory(prefix="gpugi-compare-") as scratch:
+            base = os.path.join(scratch, "base")
+            subprocess.run(["git", "-C", ROOT, "worktree", "add", "--detach", "-q", base, args.rev], check=True)
+            try:
+                lines += compare(base, args)
+            finally:
+                subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", base], check=False)
+        name = args.rev.replace("/", "_")
     os.makedirs(RESULTS, exist_ok=True)
-    path = os.path.join(RESULTS, f"compare_{args.rev.replace('/', '_')}.txt")
+    path = os.path.join(RESULTS, f"compare_{name}{'_' + args.tag if args.tag else ''}.txt")
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
     print(f"wrote {os.path.relpath(path, ROOT)}")

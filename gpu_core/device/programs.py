@@ -34,6 +34,7 @@ from ..shading import microfacet_tables
 
 INCLUDE_ROOT = Path(__file__).resolve().parent.parent
 _INCLUDE_RE = re.compile(r'^[ \t]*#[ \t]*include[ \t]+"([^"]+)"[ \t]*$', re.MULTILINE)
+_KERNEL_RE = re.compile(r"\b__kernel\b")
 _GENERATED: dict[str, Callable[[], str]] = {
     "device/structs.h": layout.structs_header,
     "device/layout_probe.cl": layout.probe_source,
@@ -85,10 +86,19 @@ _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 # (warmup.py), and the programs missing from the disk cache shared with
 # helper processes on the cores left (device/prebuild.py), at most
 # _MAX_HELPERS, each given at most _HELPER_WAIT seconds before its programs
-# are compiled here instead.
+# are compiled here instead. (NVIDIA's driver builds mostly one at a time
+# in threads too: a render's 9 programs 15.8 s one after another, 12.4-14.2
+# s in threads on an H100; but helper processes there took 27-35 s against
+# 16-22 s in threads, so it keeps to threads.)
 _SERIAL_COMPILER_PLATFORMS = ("Portable Computing Language",)
 _MAX_HELPERS = 3
 _HELPER_WAIT = 300.0
+# A program's build cost, to share builds out evenly, in source characters:
+# a fixed part, its source, and a part per kernel (fitted to PoCL on two
+# cores, where builds took 0.41 s for 20k characters and one kernel, 1.05 s
+# for the image's 329k and one, 1.4 s for the bundle's 80k and 45 kernels)
+_PROGRAM_COST = 200_000
+_KERNEL_COST = 11_000
 
 
 def kernel_cache_dir() -> Path:
@@ -166,6 +176,26 @@ def compile_helpers(device: cl.Device) -> bool:
     ``GPUGI_COMPILE_HELPERS=0`` (e.g. a farm job held to its cores)."""
     return (device.platform.name.strip() in _SERIAL_COMPILER_PLATFORMS
             and os.environ.get("GPUGI_COMPILE_HELPERS", "1") != "0")
+
+
+def build_cost(name: str) -> int:
+    """A rough measure of how long program ``name`` takes to build (see
+    _KERNEL_COST), to balance shares of builds between processes."""
+    source = load_source(name)
+    return _PROGRAM_COST + len(source) + _KERNEL_COST * len(_KERNEL_RE.findall(source))
+
+
+def shares(wanted: list[tuple[str, dict]], count: int) -> list[list[tuple[str, dict]]]:
+    """``wanted`` split into ``count`` shares of about equal build cost:
+    the costliest first, each to the share with the least so far (the
+    first share stays with the caller)."""
+    costs = {name: build_cost(name) for name in {name for name, _ in wanted}}
+    out, totals = [[] for _ in range(count)], [0] * count
+    for item in sorted(wanted, key=lambda item: -costs[item[0]]):
+        least = totals.index(min(totals))
+        out[least].append(item)
+        totals[least] += costs[item[0]]
+    return out
 
 
 def start_helper(module: str, spec: str, data: bytes) -> subprocess.Popen | None:
@@ -320,8 +350,7 @@ class Programs:
         if spec is None:
             return [], []
         processes, given = [], []
-        for helper in range(count):
-            share = missing[helper + 1::count + 1]  # this process keeps missing[0::count + 1]
+        for share in shares(missing, count + 1)[1:]:  # this process keeps the first
             process = start_helper("gpu_core.device.prebuild", spec, json.dumps(share).encode())
             if process is not None:  # else this process compiles them
                 processes.append(process)

@@ -250,10 +250,26 @@ def _fresh_build(device, tmp_path, monkeypatch):
 
 def test_programs_missing_from_the_disk_cache_are_compiled_by_helper_processes_where_the_compiler_is_serial(
         device, tmp_path, monkeypatch):
-    # this process keeps every fourth program; the helpers' programs are loaded from the disk cache
+    # this process keeps the first of four shares; the helpers' programs are loaded from the disk cache
     loaded = _fresh_build(device, tmp_path, monkeypatch)
     serial = programs_module.compile_helpers(device.device)
-    assert loaded == ({name for name, _ in _PROGRAMS[1:]} if serial else set())
+    kept = {name for name, _ in programs_module.shares(_PROGRAMS, 4)[0]}
+    assert kept and loaded == ({name for name, _ in _PROGRAMS} - kept if serial else set())
+
+
+def test_shares_of_builds_balance_their_cost_and_part_the_costliest():
+    wanted = [(name, {}) for name in ("device/bundle.cl", "accel/kdtree_build.cl", "device/scene_bundle.cl",
+                                      "gi/cut.cl", "gi/gather.cl", "gi/cache/outliers.cl",
+                                      "gi/cache/interpolation.cl", "accel/point_tree_query.cl", "image.cl")]
+    cost = {name: programs_module.build_cost(name) for name, _ in wanted}
+    for count in (2, 3, 4):
+        parts = programs_module.shares(wanted, count)
+        assert sorted(item for part in parts for item in part) == sorted(wanted)  # each program once
+        totals = [sum(cost[name] for name, _ in part) for part in parts]
+        assert max(totals) - min(totals) <= max(cost.values())
+    # the four costliest programs built in four processes, one each
+    costliest = sorted(cost, key=cost.get)[-4:]
+    assert sorted(sum(name in costliest for name, _ in part) for part in programs_module.shares(wanted, 4)) == [1] * 4
 
 
 def test_compile_helpers_are_off_when_the_environment_says_so(device, tmp_path, monkeypatch):
