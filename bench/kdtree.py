@@ -15,9 +15,12 @@ the scene each, a fan of 4,096 triangles around one vertex and a stack of
 1,000 copies of one triangle.
 
     python bench/kdtree.py [--sizes 1000,10000] [--rays N] [--repeats N] [--quick]
+                           [--device cpu] [--tag TAG]
 
 Prints the machine and the tables, writes ``bench/results/kdtree.json`` and
-the plot ``bench/figures/kdtree.png``.
+the plot ``bench/figures/kdtree.png`` (``kdtree_TAG.*`` with ``--tag``, so a
+partial run leaves the full one's figures alone; ``kdtree_quick.*`` with
+``--quick``).
 """
 
 from __future__ import annotations
@@ -283,6 +286,7 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs after the warm-up (median)")
     parser.add_argument("--quick", action="store_true", help="small sizes, few rays, one timed run")
     parser.add_argument("--device", default="cpu", help="OpenCL device spec (default cpu)")
+    parser.add_argument("--tag", default="", help="suffix of the output files (default: none, or quick)")
     args = parser.parse_args(argv)
     sizes = [int(s) for s in args.sizes.split(",")]
     if args.quick:
@@ -301,7 +305,7 @@ def main(argv=None) -> int:
           " and 2 processes: higher is better)")
     worst = [measure_worst(device, name, tris, args.repeats) for name, tris in worst_cases().items()]
     print(worst_table(worst))
-    suffix = "_quick" if args.quick else ""
+    suffix = f"_{args.tag}" if args.tag else "_quick" if args.quick else ""
     results, figure = (path.with_name(path.stem + suffix + path.suffix) for path in (RESULTS, FIGURE))
     results.parent.mkdir(parents=True, exist_ok=True)
     results.write_text(json.dumps({"machine": describe(device), "rays": args.rays, "repeats": args.repeats,
