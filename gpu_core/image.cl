@@ -135,13 +135,42 @@ inline void Image_light_sample(const SceneView *sc, const Bsdf *f, const Surface
     Image_shadow_ray(sc, f, org, &ls, scale, rate, diffuse, glossy);
 }
 
+/* The numbers of a path's first smooth scattering event: the pixel's paths
+ * (and their light-sample rounds) draw each pair of them from one scrambled
+ * Sobol sequence of the pixel (Rng_sobol2), so that they cover a light's
+ * area and a lobe's directions evenly, as the R2 anti-aliasing covers the
+ * pixel; later events draw from the path's stream. */
+typedef struct {
+    uint index; /* the path's number among the pixel's paths */
+    uint seed;  /* the pixel's */
+    bool on;    /* false past the first smooth event */
+} ImageStrata;
+
+/* The sequences of a pixel: one per light row (up to IMAGE_ALL_LIGHTS), one
+ * for a light picked among many, one for the world, one for the BSDF. */
+#define IMAGE_PAIR_PICKED 0x40U
+#define IMAGE_PAIR_WORLD 0x41U
+#define IMAGE_PAIR_BSDF 0x42U
+
+/* Two numbers of the path's stream. */
+inline float2 Image_random2(Rng *rng) {
+    float a = Rng_next(rng);
+    return (float2)(a, Rng_next(rng));
+}
+
+/* Two numbers for pair `pair` in round k of `rounds` (light samples). */
+inline float2 Image_pair(const ImageStrata *strata, uint pair, int k, int rounds, Rng *rng) {
+    if (!strata->on) return Image_random2(rng);
+    return Rng_sobol2(strata->index * (uint)rounds + (uint)k, strata->seed ^ Rng_hash(pair));
+}
+
 /* Direct light at a scattering point, world included: light_samples
  * rounds, averaged. With up to IMAGE_ALL_LIGHTS lights a round sends a
  * shadow ray to every light (the least noise for the rays); with more,
  * one ray to one light picked by power, so a frame's cost does not grow
  * with the number of lights. Writes the diffuse and glossy parts. */
-inline void Image_direct(const SceneView *sc, const Bsdf *f, const SurfacePoint *sp, int light_samples, Rng *rng,
-                         float3 *diffuse, float3 *glossy) {
+inline void Image_direct(const SceneView *sc, const Bsdf *f, const SurfacePoint *sp, int light_samples,
+                         const ImageStrata *strata, Rng *rng, float3 *diffuse, float3 *glossy) {
     *diffuse = *glossy = (float3)(0.0f);
     bool has_world = Scene_has_world(sc);
     float rounds = (float)light_samples;
@@ -149,17 +178,20 @@ inline void Image_direct(const SceneView *sc, const Bsdf *f, const SurfacePoint 
         if (sc->light_count <= IMAGE_ALL_LIGHTS) {
             for (int i = 0; i < sc->light_count; ++i) {
                 Light l = sc->lights[i];
-                float3 u = (float3)(Rng_next(rng), Rng_next(rng), Rng_next(rng));
+                float2 v = Image_pair(strata, (uint)i, k, light_samples, rng);
+                float3 u = (float3)(Rng_next(rng), v.x, v.y);
                 Image_light_sample(sc, f, sp, &l, u, 1.0f, rounds, diffuse, glossy);
             }
         } else {
             float p;
             Light l = sc->lights[Image_pick_light(sc, Rng_next(rng), &p)];
-            float3 u = (float3)(Rng_next(rng), Rng_next(rng), Rng_next(rng));
+            float2 v = Image_pair(strata, IMAGE_PAIR_PICKED, k, light_samples, rng);
+            float3 u = (float3)(Rng_next(rng), v.x, v.y);
             if (p > 0.0f) Image_light_sample(sc, f, sp, &l, u, 1.0f / p, rounds * p, diffuse, glossy);
         }
         if (has_world) {
-            LightSample ls = Light_sample_world(sc->world.xyz, sp->ns, Rng_next(rng), Rng_next(rng));
+            float2 v = Image_pair(strata, IMAGE_PAIR_WORLD, k, light_samples, rng);
+            LightSample ls = Light_sample_world(sc->world.xyz, sp->ns, v.x, v.y);
             if (dot(ls.dir, sp->ng) >= 0.0f)
                 Image_shadow_ray(sc, f, sp->p + sp->eps * sp->ng, &ls, 1.0f, rounds, diffuse, glossy);
         }
@@ -247,6 +279,7 @@ typedef struct {
     bool features_done;  /* the denoising features are taken */
     float pdf;           /* pdf of the ray's direction (0: singular, or from the camera) */
     float3 prev_n;       /* shading normal where it left (the world sampler's pdf) */
+    ImageStrata strata;  /* numbers of the first smooth event */
 } ImageState;
 
 /* The path leaves from p along dir, a new segment. */
@@ -337,7 +370,7 @@ inline bool Image_scatter(const SceneView *sc, const Camera *cam, const ImageJob
 #endif
     if (smooth) {
         float3 d, g;
-        Image_direct(sc, &f, sp, job->light_samples, rng, &d, &g);
+        Image_direct(sc, &f, sp, job->light_samples, &st->strata, rng, &d, &g);
         if (st->bounces == 0) {
             Image_add(path->light, st->throughput * d, PASS_DIFFUSE, 1, false, false);
             Image_add(path->light, st->throughput * g, PASS_GLOSSY, 1, false, false);
@@ -346,10 +379,13 @@ inline bool Image_scatter(const SceneView *sc, const Camera *cam, const ImageJob
         }
     }
     /* the next direction */
-    float u_lobe = Rng_next(rng), u1 = Rng_next(rng), u2 = Rng_next(rng), u3 = Rng_next(rng);
+    float u_lobe = Rng_next(rng);
+    float2 u = smooth ? Image_pair(&st->strata, IMAGE_PAIR_BSDF, 0, 1, rng) : Image_random2(rng);
+    float u3 = Rng_next(rng);
+    if (smooth) st->strata.on = false;
     float3 wi, weight;
     float pdf;
-    int label = Bsdf_sample(&f, u_lobe, u1, u2, u3, &wi, &weight, &pdf);
+    int label = Bsdf_sample(&f, u_lobe, u.x, u.y, u3, &wi, &weight, &pdf);
     if (label == 0) return false;
     float3 dir = Bsdf_to_world(&f, wi);
     if (st->bounces == 0)
@@ -376,8 +412,8 @@ inline bool Image_scatter(const SceneView *sc, const Camera *cam, const ImageJob
 /* Follow the camera path through image position (px, py) (pixel (wx, wy)
  * of the window) until it ends; writes what it brings into `path`. */
 inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *job, const ImageGi *gi, int wx, int wy,
-                       float px, float py, Rng *rng, ImagePath *path) {
-    ImageState st = {.throughput = (float3)(1.0f), .first_pass = PASS_DIFFUSE};
+                       float px, float py, ImageStrata strata, Rng *rng, ImagePath *path) {
+    ImageState st = {.throughput = (float3)(1.0f), .first_pass = PASS_DIFFUSE, .strata = strata};
     Camera_ray(cam, px, py, &st.org, &st.dir, &st.tmin, &st.tmax);
     for (int p = 0; p < IMAGE_SLOTS; ++p) path->light[p] = (float3)(0.0f);
     path->alpha = 1.0f;
@@ -497,6 +533,7 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
     uint pixel_id = (uint)(py * cam.width + px);
     uint aa_x = Rng_hash(pixel_id ^ Rng_hash(job.seed ^ 0xa511e9b3U));
     uint aa_y = Rng_hash(aa_x);
+    uint strata_seed = Rng_hash(aa_y ^ 0x68e31da4U);
     for (int s = 0; s < job.samples; ++s) {
         uint number = (uint)(job.sample_start + s); /* the path's number among all the pixel's passes */
         Rng rng = Rng_make(pixel_id, number, job.seed);
@@ -504,7 +541,8 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
         ImagePath path;
         float sx = (float)px + 0.5f + Image_filter_offset(pixel_filter, aa.x);
         float sy = (float)py + 0.5f + Image_filter_offset(pixel_filter, aa.y);
-        Image_path(&sc, &cam, &job, &gi, wx, wy, sx, sy, &rng, &path);
+        ImageStrata strata = {number, strata_seed, true};
+        Image_path(&sc, &cam, &job, &gi, wx, wy, sx, sy, strata, &rng, &path);
         Image_accumulate(&path, job.clamp, pixel_light);
         alpha_sum += path.alpha;
         albedo_sum += path.albedo;
