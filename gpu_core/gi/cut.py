@@ -39,7 +39,7 @@ from ..device.layout import float4_rows
 DELTA = 0.2  # default refinement threshold, relative to E_p
 MAX_ROUNDS = 6  # default refinement rounds
 LEVELS = (12, 13)  # tree levels whose mean E~_p is E_min
-NEIGHBOURS = 8  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS; README)
+NEIGHBOURS = 6  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS; README)
 COHERENT = 0.9  # |mean photon normal| below this: the node spans several surfaces (cut.cl CUT_COHERENT)
 # Caustic estimates gather within this many times the caustic map's typical
 # k-photon radius (its VVH radius), Jensen's maximum radius: further out the
