@@ -91,6 +91,55 @@ INLINE_OVL float3 Inline_normalize(float3 v) {
     return INLINE_SQUARES_SAFE(s) ? v / __builtin_sqrtf(s) : normalize(v);
 }
 
+/* asin(s) = s + s z P(z) with z = s^2 for |x| <= 1/2, and beyond that
+ * pi/2 - 2 asin(sqrt((1 - |x|) / 2)); P: a degree-4 least-maximum fit of
+ * (asin(s) - s) / (s z) on z in [0, 1/4] (relative error 5e-9, so the
+ * result is within the builtin's 4 ulp) */
+INLINE_OVL float Inline_asin(float x) {
+    float a = __builtin_fabsf(x);
+    bool outer = a > 0.5f;
+    float z = outer ? 0.5f * (1.0f - a) : a * a;
+    float s = outer ? __builtin_sqrtf(z) : a;
+    float p = s + s * z * ((((0.04216631f * z + 0.02417952f) * z + 0.04547038f) * z + 0.07495297f) * z + 0.16666752f);
+    /* pi/2 split in two floats */
+    float r = outer ? (1.57079637f - 2.0f * p) - 4.37113900e-8f : p;
+    return __builtin_copysignf(r, x);
+}
+
+/* native_sin and native_cos (whose accuracy OpenCL leaves to the device):
+ * x reduced by pi/2 (Cody and Waite's three-part constant, exact while
+ * |x| < 8192), then degree-7 and degree-8 fits on [-pi/4, pi/4] (relative
+ * error 4e-9 and 1e-10) chosen and signed by the quadrant; the library
+ * function for larger, infinite or NaN x */
+#define INLINE_TRIG_REACH 8192.0f
+INLINE_OVL float Inline_trig_quadrant(float x, int *q) {
+    float k = __builtin_rintf(x * 0.636619772f);
+    *q = (int)k & 3;
+    return ((x - k * 1.5703125f) - k * 4.83751297e-4f) - k * 7.54978995e-8f;
+}
+INLINE_OVL float Inline_trig_sin(float r) {
+    float r2 = r * r;
+    return r + r * r2 * ((-1.9515296e-4f * r2 + 8.332161e-3f) * r2 - 0.16666655f);
+}
+INLINE_OVL float Inline_trig_cos(float r) {
+    float r2 = r * r;
+    return 1.0f - 0.5f * r2 + r2 * r2 * ((2.4433157e-5f * r2 - 1.3887316e-3f) * r2 + 4.1666646e-2f);
+}
+INLINE_OVL float Inline_native_sin(float x) {
+    if (!(__builtin_fabsf(x) < INLINE_TRIG_REACH)) return native_sin(x);
+    int q;
+    float r = Inline_trig_quadrant(x, &q);
+    float v = (q & 1) ? Inline_trig_cos(r) : Inline_trig_sin(r);
+    return (q & 2) ? -v : v;
+}
+INLINE_OVL float Inline_native_cos(float x) {
+    if (!(__builtin_fabsf(x) < INLINE_TRIG_REACH)) return native_cos(x);
+    int q;
+    float r = Inline_trig_quadrant(x, &q);
+    float v = (q & 1) ? Inline_trig_sin(r) : Inline_trig_cos(r);
+    return ((q + 1) & 2) ? -v : v;
+}
+
 #undef popcount
 #define popcount Inline_popcount
 #undef isnan
@@ -119,6 +168,12 @@ INLINE_OVL float3 Inline_normalize(float3 v) {
 #define length Inline_length
 #undef normalize
 #define normalize Inline_normalize
+#undef asin
+#define asin Inline_asin
+#undef native_sin
+#define native_sin Inline_native_sin
+#undef native_cos
+#define native_cos Inline_native_cos
 
 #endif /* __has_builtin */
 #endif

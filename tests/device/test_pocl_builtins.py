@@ -92,3 +92,55 @@ def test_the_header_goes_before_programs_on_pocl_only(device, probe_program):
     source = device.programs._cache_entry("builtins_probe.cl", ())[0]
     on_pocl = "portable computing language" in device.context.devices[0].platform.name.lower()
     assert ("#define dot Inline_dot" in source) == on_pocl
+
+
+_TRIG_KERNEL = """
+/* asin, native_sin and native_cos of every x */
+__kernel void Trig_probe(const __global float *x, __global float4 *out) {
+    int i = get_global_id(0);
+    out[i] = (float4)(asin(x[i]), native_sin(x[i]), native_cos(x[i]), 0.0f);
+}
+"""
+
+
+def _trig(device, probe_program, x):
+    probe_program("trig_probe.cl", _TRIG_KERNEL)
+    program = device.program("trig_probe.cl", {})
+    x = np.asarray(x, np.float32)
+    out = np.zeros((len(x), 4), np.float32)
+    x_buf, out_buf = device.to_device(x), device.empty(out.nbytes)
+    cl.Kernel(program, "Trig_probe")(device.queue, (len(x),), None, x_buf, out_buf)
+    cl.enqueue_copy(device.queue, out, out_buf)
+    return x, out
+
+
+def _ulps(ours, exact):
+    """Distance of float32 results from the float64 values in units of the last place there."""
+    spacing = np.spacing(np.abs(exact).astype(np.float32)).astype(np.float64)
+    return np.abs(ours.astype(np.float64) - exact) / spacing
+
+
+def test_asin_within_four_ulp_and_nan_outside_its_domain(device, probe_program):
+    rng = np.random.default_rng(5)
+    inside = np.concatenate([np.linspace(-1, 1, 20001), [0.5, -0.5, np.nextafter(np.float32(0.5), 1), 1e-30, -1e-8],
+                             rng.uniform(-1, 1, 5000), 10.0 ** rng.uniform(-38, 0, 2000)])
+    x, out = _trig(device, probe_program, np.concatenate([inside, [1.5, -2.0, np.nan]]))
+    n = len(inside)
+    exact = np.arcsin(x[:n].astype(np.float64))
+    assert _ulps(out[:n, 0], exact).max() <= 4.0  # OpenCL's bound for asin
+    assert np.all(np.signbit(out[:n, 0]) == np.signbit(x[:n]))
+    assert np.isnan(out[n:, 0]).all()
+
+
+def test_native_sin_and_cos_close_to_the_exact_values_everywhere(device, probe_program):
+    rng = np.random.default_rng(6)
+    reach = np.concatenate([np.linspace(-7, 7, 20001), rng.uniform(-8191, 8191, 20000), [0.0, 2 * np.pi, -np.pi / 2]])
+    beyond = np.array([8192.0, -1e6, 3e30, np.inf, np.nan])
+    x, out = _trig(device, probe_program, np.concatenate([reach, beyond]))
+    n = len(reach)
+    x64 = x[:n].astype(np.float64)
+    # within a few float32 roundings of the float32 argument's exact sine and cosine
+    assert np.abs(out[:n, 1] - np.sin(x64)).max() <= 2e-7
+    assert np.abs(out[:n, 2] - np.cos(x64)).max() <= 2e-7
+    # beyond the reduction's reach: the device's own function, finite where x is
+    assert np.all(np.abs(out[n:n + 3, 1:3]) <= 1.0) and np.isnan(out[n + 3:, 1:3]).all()
