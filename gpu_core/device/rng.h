@@ -48,12 +48,13 @@ inline float2 Rng_r2(uint index, uint ox, uint oy) {
 inline uint Rng_reverse(uint x) {
 #if defined(__has_builtin) && __has_builtin(__builtin_bitreverse32)
     return __builtin_bitreverse32(x);
-#endif
+#else
     x = ((x >> 1) & 0x55555555U) | ((x & 0x55555555U) << 1);
     x = ((x >> 2) & 0x33333333U) | ((x & 0x33333333U) << 2);
     x = ((x >> 4) & 0x0f0f0f0fU) | ((x & 0x0f0f0f0fU) << 4);
     x = ((x >> 8) & 0x00ff00ffU) | ((x & 0x00ff00ffU) << 8);
     return (x >> 16) | (x << 16);
+#endif
 }
 
 /* The Laine-Karras permutation: each bit of x flipped by a hash of the

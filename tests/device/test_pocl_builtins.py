@@ -133,6 +133,8 @@ def test_asin_within_four_ulp_and_nan_outside_its_domain(device, probe_program):
 
 
 def test_native_sin_and_cos_close_to_the_exact_values_everywhere(device, probe_program):
+    if "portable computing language" not in device.context.devices[0].platform.name.lower():
+        pytest.skip("the inlined native_sin and native_cos are PoCL's; elsewhere their accuracy is the driver's")
     rng = np.random.default_rng(6)
     reach = np.concatenate([np.linspace(-7, 7, 20001), rng.uniform(-8191, 8191, 20000), [0.0, 2 * np.pi, -np.pi / 2]])
     beyond = np.array([8192.0, -1e6, 3e30, np.inf, np.nan])
