@@ -171,9 +171,7 @@ inline void Light_sample_rect_solid_angle(const Light *l, const LightRect *r, fl
     float dist = sqrt(dd2 + yv * yv);
     s->dir = to_y * (1.0f / dist);
     s->dist = Ray_shadow_length(dist, x + to_y);
-    /* one-sided: x must lie on the emitting side */
-    bool front = dot(x - l->position.xyz, l->direction.xyz) > 0.0f;
-    s->value = front ? l->radiance.xyz * r->solid : (float3)(0.0f);
+    s->value = l->radiance.xyz * r->solid; /* x on the emitting side: Light_sample_area */
     s->pdf = 1.0f / r->solid;
 }
 
@@ -187,6 +185,9 @@ inline float Light_area(const Light *l) {
  * uniform point on the rectangle or ellipse, where radiance P/(pi A) over
  * the pdf t^2 / (A cos_y) gives P cos_y / (pi t^2). */
 inline LightSample Light_sample_area(const Light *l, float3 x, float u1, float u2) {
+    /* one-sided: nothing reaches x behind (or in) the light's plane, so no
+     * sample is drawn there (the ceiling above a Cornell box's light) */
+    if (!(dot(x - l->position.xyz, l->direction.xyz) > 0.0f)) return Light_none();
     LightSample s;
     LightRect r;
     if (l->shape == AREA_RECTANGLE && Light_rect_from(l, x, &r)) {
