@@ -5,7 +5,7 @@ A GPU machine need not have Blender (the bpy module needs Python 3.11), so
 this benchmark comes in two halves:
 
     python bench/frame_snapshot.py save [--scenes ...] [--sizes 256 512]
-    python bench/frame_snapshot.py run [--device gpu] [--repeats 3] [--tag TAG]
+    python bench/frame_snapshot.py run [--device gpu] [--repeats 3] [--tag TAG] [--watchdog S]
 
 ``save`` (with bpy) writes, for each scene of ``blend_scenes/``, the add-on's
 own export of the scene (F12's: ``export_scene``) at each size and the
@@ -21,12 +21,16 @@ per second in Reference mode at 16 samples, direct light only and with deep
 bounces (12 and 12), on the kernel's own time; and for ``--cold-scenes``
 the first Preview frame of a fresh process with every kernel cache empty
 (ours, PoCL's and NVIDIA's). ``--no-denoise`` renders without the denoiser.
+A measurement (one scene, size and preset, or one paths-per-second figure)
+that takes longer than ``--watchdog`` seconds ends the process with the
+stack of every thread, so a build or kernel that does not end shows where.
 Writes bench/results/frame_snapshot[_TAG].json and .txt.
 """
 
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import json
 import os
 import pickle
@@ -136,8 +140,18 @@ def first_frame(path: str, size: int, device_spec: str | None, no_denoise: bool)
     print(json.dumps(dict(seconds=seconds, ms=ms)))
 
 
+def guarded(seconds: float, measure, *args):
+    """``measure(*args)``, ending the process with every thread's stack
+    (faulthandler, which needs no interpreter lock) after ``seconds``."""
+    faulthandler.dump_traceback_later(seconds, exit=True)
+    try:
+        return measure(*args)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+
+
 def run(device_spec: str | None, repeats: int, tag: str, presets: list[str], scenes: list[str] | None,
-        cold_scenes: list[str], no_denoise: bool) -> None:
+        cold_scenes: list[str], no_denoise: bool, watchdog: float) -> None:
     """Render every snapshot; print and write the figures."""
     from gpu_core.device import get_device
 
@@ -167,12 +181,13 @@ def run(device_spec: str | None, repeats: int, tag: str, presets: list[str], sce
                     say(f"{name} {size} first frame, empty caches: process {first['process_seconds']:.1f} s, "
                         f"render {first['seconds']:.2f} s ({stage_line(first['ms'])})")
                 for direct_only in (True, False):
-                    rate = paths_per_second(device, scene, settings["preview"], direct_only, repeats)
+                    rate = guarded(watchdog, paths_per_second, device, scene, settings["preview"], direct_only,
+                                   repeats)
                     rates.append(dict(scene=name, size=size, direct_only=direct_only, mpaths=rate))
                     say(f"{name} {size} image kernel, {'direct light' if direct_only else 'deep bounces'}, "
                         f"16 spp: {rate:.2f} M paths/s")
             for preset in presets:
-                result = timed(device, scene, settings[preset], repeats)
+                result = guarded(watchdog, timed, device, scene, settings[preset], repeats)
                 rows.append(dict(scene=name, size=size, preset=preset, **result))
                 say(f"{name} {size} {preset}: {result['seconds'] * 1e3:.0f} ms; {stage_line(result['ms'])}")
     os.makedirs(RESULTS, exist_ok=True)
@@ -202,6 +217,8 @@ def main() -> None:
     running.add_argument("--no-denoise", action="store_true",
                          help="render without the denoiser (the scenes' Denoise setting otherwise)")
     running.add_argument("--tag", default="", help="suffix of the output files")
+    running.add_argument("--watchdog", type=float, default=600.0,
+                         help="seconds one measurement may take before the process ends with every thread's stack")
     first = verbs.add_parser("first-frame", help=argparse.SUPPRESS)
     first.add_argument("path")
     first.add_argument("size", type=int)
@@ -211,7 +228,8 @@ def main() -> None:
     if args.verb == "save":
         save(args.scenes, args.sizes)
     elif args.verb == "run":
-        run(args.device, args.repeats, args.tag, args.presets, args.scenes, args.cold_scenes, args.no_denoise)
+        run(args.device, args.repeats, args.tag, args.presets, args.scenes, args.cold_scenes, args.no_denoise,
+            args.watchdog)
     else:
         first_frame(args.path, args.size, args.device, args.no_denoise)
 

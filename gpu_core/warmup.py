@@ -37,7 +37,7 @@ from .accel.point_tree import PointTree
 from .device import Device
 from .device.programs import compile_helpers, device_spec, start_helper, stop_helper
 from .gi import cut, shading_points
-from .gi.cache import interpolation, outliers, samples
+from .gi.cache import interpolation, neighbours, samples
 from .gi.pipeline import GiField
 from .image import render_image
 from .plan import Held, plan
@@ -109,7 +109,7 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
     on its own: its shading points, their cache points (where it gathers),
     its image over an empty GI field (no cache point anywhere; not where
     glossy paths read the cut, which needs the maps), the cache points'
-    outlier clamp and interpolation over dark stand-in records, and the
+    neighbour checks and interpolation over dark stand-in records, and the
     caustic estimate over a stand-in map (a photon at each shading point)."""
     settings = settings.validated()
     if settings.mode != "gi":
@@ -131,10 +131,9 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
                      GiField(empty, empty, empty, empty, settings.gi_subpixels))
     if chosen is not None and chosen.count:
         m, dark = chosen.count, device.zeros(16 * chosen.count)
-        outliers.clamp_outliers(device, chosen.pos, dark, m)
-        interpolation.interpolate_on_device(device, chosen.pos, chosen.nrm, dark,
-                                            device.to_device(np.ones(m, np.float32)), m, points.pos, points.nrm,
-                                            points.count)
+        checked = neighbours.check(device, chosen.pos, dark, device.to_device(np.ones(m, np.float32)), m)
+        interpolation.interpolate_on_device(device, chosen.pos, chosen.nrm, dark, checked.radii, m, points.pos,
+                                            points.nrm, points.count)
     if points.count and "caustics" in the_plan.stages:
         pos, nrm = points.positions, points.normals
         stand_in = PointTree.build(device, pos, np.full_like(pos, 1e-3), nrm, nrm, k_hint=settings.photon_k)

@@ -6,7 +6,8 @@ shading points (each pixel's first diffuse hits); irradiance sample points
 chosen among them (adaptive seeding + k-means); the illumination cut of the
 global photon tree, its nodes also carrying the caustic map's light; final
 gathering at the sample points through the cut;
-lone outliers clamped; Ward interpolation to every shading point; caustics
+lone outliers and the samples' distances clamped by their neighbours';
+Ward interpolation to every shading point; caustics
 by density estimation of the caustic map at the shading points. Each stage
 reads the buffers the stage before wrote; the image kernel then reads the
 irradiance back at its camera paths' first diffuse hits through the
@@ -29,7 +30,7 @@ from ..photons.trace import PhotonMaps
 from ..scene.upload import SceneBuffers
 from ..settings import RenderSettings
 from . import cut, gather, shading_points
-from .cache import interpolation, outliers, samples
+from .cache import interpolation, neighbours, samples
 
 
 # what the stats tell of the choice of cache points (samples.select)
@@ -69,7 +70,7 @@ class CacheRecords:
     pos: cl.Buffer  # float4 per record
     nrm: cl.Buffer  # float4 per record, unit
     e: cl.Buffer  # float4 per record: irradiance (outliers clamped)
-    r: cl.Buffer  # float per record: harmonic mean distance R_j
+    r: cl.Buffer  # float per record: harmonic mean distance R_j (neighbour-clamped)
     count: int
 
 
@@ -158,12 +159,12 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
                                      settings.max_bounces, scene_defines, should_stop)
         check_stop(should_stop)
         with timer.stage("interpolate"):
-            clamped, outliers_clamped = outliers.clamp_outliers(device, chosen.pos, gathered.e, chosen.count)
-        new = CacheRecords(chosen.pos, chosen.nrm, clamped, gathered.distance, chosen.count)
+            checked = neighbours.check(device, chosen.pos, gathered.e, gathered.distance, chosen.count)
+        new = CacheRecords(chosen.pos, chosen.nrm, checked.irradiance, checked.radii, chosen.count)
         stats.update(sample_points=chosen.count, sample_points_reused=samples_reused,
                      selection={key: chosen.stats.get(key) for key in _SELECTION_STATS},
                      cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
-                     outliers_clamped=outliers_clamped)
+                     outliers_clamped=checked.outliers_clamped, radii_clamped=checked.radii_clamped)
     merged = _merged(device, records if kept else None, new)
     stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}
     say("interpolation")
@@ -208,7 +209,7 @@ def programs(device: Device, settings: RenderSettings, stages: list[str], scene_
     wanted = shading_points.programs(scene_defines)
     if "final_gather" in stages:
         wanted += samples.programs() + cut.programs(settings.photon_k)
-        wanted += gather.programs(device, scene_defines) + outliers.programs()
+        wanted += gather.programs(device, scene_defines) + neighbours.programs()
         wanted += interpolation.programs()
     if "caustics" in stages:
         wanted += query_programs(settings.photon_k)

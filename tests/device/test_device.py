@@ -11,7 +11,7 @@ import pytest
 from conftest import ROOT
 
 import gpu_core.device.programs as programs_module
-from gpu_core.gi.cache import interpolation, outliers
+from gpu_core.gi.cache import interpolation, neighbours
 from gpu_core.device import get_device, list_devices, load_source
 from gpu_core.errors import DeviceError
 
@@ -32,7 +32,7 @@ _PROBE = """
 import json, sys, pathlib
 import numpy as np, pyopencl as cl
 import gpu_core.device.programs as programs_module
-from gpu_core.gi.cache import interpolation, outliers
+from gpu_core.gi.cache import interpolation, neighbours
 from gpu_core.device import get_device
 programs_module.INCLUDE_ROOT = pathlib.Path(sys.argv[1])
 dev = get_device()
@@ -59,7 +59,7 @@ import sys, pathlib
 import numpy as np
 import pyopencl as cl
 import gpu_core.device.programs as programs_module
-from gpu_core.gi.cache import interpolation, outliers
+from gpu_core.gi.cache import interpolation, neighbours
 from gpu_core.device import get_device
 programs_module.INCLUDE_ROOT = pathlib.Path(sys.argv[1])
 dev = get_device()
@@ -233,7 +233,7 @@ def test_damaged_cache_file_is_rebuilt_and_replaced(tmp_path, damage):
 
 
 # programs of no scene features, none of them bundled, each compiling in about a second
-_PROGRAMS = [("photons/photon_reweight.cl", {}), ("accel/kdtree_overlay.cl", {}), *outliers.programs(),
+_PROGRAMS = [("photons/photon_reweight.cl", {}), ("accel/kdtree_overlay.cl", {}), *neighbours.programs(),
              *interpolation.programs()[:1]]
 
 
@@ -259,7 +259,7 @@ def test_programs_missing_from_the_disk_cache_are_compiled_by_helper_processes_w
 
 def test_shares_of_builds_balance_their_cost_and_part_the_costliest():
     wanted = [(name, {}) for name in ("device/bundle.cl", "accel/kdtree_build.cl", "device/scene_bundle.cl",
-                                      "gi/cut.cl", "gi/gather.cl", "gi/cache/outliers.cl",
+                                      "gi/cut.cl", "gi/gather.cl", "gi/cache/neighbours.cl",
                                       "gi/cache/interpolation.cl", "accel/point_tree_query.cl", "image.cl")]
     cost = {name: programs_module.build_cost(name) for name, _ in wanted}
     for count in (2, 3, 4):

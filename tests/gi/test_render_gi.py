@@ -11,7 +11,7 @@ from scenes_py import box_scene, on_device
 
 from gpu_core.device.layout import float4_rows
 from gpu_core.gi import cut, gather, shading_points
-from gpu_core.gi.cache import outliers
+from gpu_core.gi.cache import neighbours
 from gpu_core.renderer import Renderer
 from gpu_core.settings import RenderSettings
 
@@ -163,14 +163,67 @@ def test_a_lone_bright_cache_sample_is_brought_down_to_its_neighbours(device):
     irradiance[7] = 100.0  # one sample saw a focused caustic
     bright = np.linalg.norm(positions[:, :2] - [0.5, 0.5], axis=1) < 0.35
     irradiance[bright] = 50.0  # a lit patch many samples see
-    out, count = outliers.clamp_outliers(device, device.to_device(float4_rows(positions)),
-                                         device.to_device(float4_rows(irradiance)), len(positions))
-    clamped = device.read(out, (len(positions), 4), np.float32)[:, :3]
-    np.testing.assert_allclose(clamped[7], outliers.OUTLIER_RATIO, rtol=1e-5)
+    checked = neighbours.check(device, device.to_device(float4_rows(positions)),
+                               device.to_device(float4_rows(irradiance)),
+                               device.to_device(np.ones(len(positions), np.float32)), len(positions))
+    clamped = device.read(checked.irradiance, (len(positions), 4), np.float32)[:, :3]
+    np.testing.assert_allclose(clamped[7], neighbours.OUTLIER_RATIO, rtol=1e-5)
     # the patch stays lit where its samples' neighbours are in it too
     d = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2)
-    nearest = np.argsort(d, axis=1)[:, 1:outliers.OUTLIER_NEIGHBOURS + 1]
+    nearest = np.argsort(d, axis=1)[:, 1:neighbours.NEIGHBOURS + 1]
     inner = bright & bright[nearest].all(axis=1)
     assert inner.sum() > 10 and np.all(clamped[inner] == 50.0)
     assert np.all(clamped[~bright & (np.arange(400) != 7)] == 1.0)
-    assert count >= 1
+    assert checked.outliers_clamped >= 1
+
+
+def _clamped_radii(device, positions, radii):
+    """neighbours.check's R_j of samples at ``positions`` with distances ``radii``."""
+    m = len(positions)
+    checked = neighbours.check(device, device.to_device(float4_rows(positions)),
+                               device.to_device(float4_rows(np.ones((m, 3), np.float32))),
+                               device.to_device(np.asarray(radii, np.float32)), m)
+    return device.read(checked.radii, m, np.float32), checked.radii_clamped
+
+
+def test_neighbour_clamping_matches_rounds_of_the_bound_over_each_samples_nearest(device):
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(11)
+    positions = rng.uniform(-1, 1, (600, 3)).astype(np.float32)
+    radii = rng.uniform(0.05, 3.0, 600).astype(np.float32)
+    radii[rng.choice(600, 30, replace=False)] = np.inf  # samples whose rays hit nothing
+    radii[rng.choice(600, 20, replace=False)] = 1e-3  # samples in crevices
+    out, count = _clamped_radii(device, positions, radii)
+    # the oracle: the same rounds over cKDTree's neighbours, in float32
+    dist, idx = cKDTree(positions.astype(np.float64)).query(positions.astype(np.float64), neighbours.NEIGHBOURS + 1)
+    dist, idx = dist[:, 1:].astype(np.float32), idx[:, 1:]
+    expect = radii.copy()
+    for _ in range(neighbours.RADIUS_ROUNDS):
+        expect = np.minimum(expect, (expect[idx] + dist).min(axis=1))
+    np.testing.assert_allclose(out, expect, rtol=1e-5)
+    assert np.all(out <= radii) and np.isfinite(out).all()
+    assert count == int((out < radii).sum()) and count > 100
+
+
+def test_a_small_distance_bounds_the_samples_around_it_and_no_distance_grows(device):
+    # a row of samples 0.1 apart, all open (R = 5) but one in a crevice (R = 0.01)
+    positions = np.zeros((40, 3), np.float32)
+    positions[:, 0] = 0.1 * np.arange(40)
+    radii = np.full(40, 5.0, np.float32)
+    radii[20] = 0.01
+    out, count = _clamped_radii(device, positions, radii)
+    hops = np.abs(np.arange(40) - 20)
+    # within RADIUS_ROUNDS neighbours of it: its R plus the way there; further out: untouched or bounded
+    near = hops <= neighbours.RADIUS_ROUNDS
+    np.testing.assert_allclose(out[near], 0.01 + 0.1 * hops[near], rtol=1e-5)
+    assert np.all(out <= radii) and out[20] == np.float32(0.01)
+    assert count == 39 - int(np.sum(out == 5.0))
+
+
+def test_neighbour_checks_leave_too_few_samples_as_they_are(device):
+    positions = np.zeros((neighbours.NEIGHBOURS, 3), np.float32)
+    positions[:, 0] = np.arange(neighbours.NEIGHBOURS)
+    radii = np.array([1e-3] + [10.0] * (neighbours.NEIGHBOURS - 1), np.float32)
+    out, count = _clamped_radii(device, positions, radii)
+    assert count == 0 and np.array_equal(out, radii)

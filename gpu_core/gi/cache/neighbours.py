@@ -1,0 +1,72 @@
+"""Cache samples checked against their nearest samples (neighbours.cl).
+
+Lone outliers: a few gather rays that hit a small, very bright spot (a
+focused caustic) make one sample far brighter than its neighbours, and
+interpolation would spread it into a blotch on the wall. Each sample's
+irradiance is brought down to OUTLIER_RATIO times the median of its
+NEIGHBOURS nearest samples' (luminance); where the neighbours see the light
+too, nothing changes.
+
+Neighbour clamping [Krivanek et al. 2006]: a sample's harmonic-mean hit
+distance R_j sets how far it is trusted (interpolation.py), and a sample
+in the open beside one in a crevice (under a sphere, in a corner) has a far
+larger R_j: it would cover the crevice with the brighter irradiance of the
+open. Each R_j is clamped to R_k + |x_j - x_k| over its neighbours k, in
+RADIUS_ROUNDS rounds, so that a small R_j also bounds the samples around
+it, one neighbour further each round. On the Cornell box at Final this
+took the display error against Cycles from 0.037 to 0.031 (README).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from ...accel.point_tree import PointTree
+from ...device import Device, primitives
+
+NEIGHBOURS = 8  # samples a cache sample is compared with
+OUTLIER_RATIO = 4.0  # largest irradiance of a sample over its neighbours' median
+RADIUS_ROUNDS = 8  # rounds of neighbour clamping (the Cornell box's radii settle within 6)
+_PROGRAM = "gi/cache/neighbours.cl"
+_DEFINES = {"KNN_K": NEIGHBOURS + 1, "NEIGHBOURS": NEIGHBOURS, "OUTLIER_RATIO": f"{OUTLIER_RATIO!r}f"}
+
+
+def programs() -> list[tuple[str, dict]]:
+    return [(_PROGRAM, _DEFINES)]
+
+
+@dataclass
+class Checked:
+    """The samples' irradiance with lone outliers brought down and their
+    distances R_j clamped by their neighbours', and how many of each."""
+
+    irradiance: cl.Buffer  # float4 per sample
+    radii: cl.Buffer  # float per sample
+    outliers_clamped: int
+    radii_clamped: int
+
+
+def check(device: Device, positions: cl.Buffer, irradiance: cl.Buffer, radii: cl.Buffer, m: int) -> Checked:
+    """The ``m`` samples (float4 positions and irradiance, float R_j)
+    checked against their NEIGHBOURS nearest; with no more samples than
+    that, as they are."""
+    if m <= NEIGHBOURS:
+        return Checked(irradiance, radii, 0, 0)
+    tree = PointTree.from_device(device, primitives.indexed_points(device, positions, m))
+    out, ids, dists = device.empty(16 * m), device.empty(4 * NEIGHBOURS * m), device.empty(4 * NEIGHBOURS * m)
+    counts = device.zeros(8)
+    device.kernel(_PROGRAM, "Neighbours_clamp_outliers", _DEFINES)(
+        m, *tree.kernel_args(), positions, irradiance, np.int32(m), out, ids, dists, counts)
+    # Jacobi rounds between two buffers, the gathered R_j left as they are
+    clamp_radii = device.kernel(_PROGRAM, "Neighbours_clamp_radii", _DEFINES)
+    turns = [device.empty(4 * m), device.empty(4 * m)]
+    now = radii
+    for round_ in range(RADIUS_ROUNDS):
+        last = round_ == RADIUS_ROUNDS - 1
+        clamp_radii(m, ids, dists, radii, now, np.int32(m), np.int32(last), turns[round_ % 2], counts)
+        now = turns[round_ % 2]
+    outliers_clamped, radii_clamped = device.read(counts, 2, np.int32)
+    return Checked(out, now, int(outliers_clamped), int(radii_clamped))
