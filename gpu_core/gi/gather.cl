@@ -67,7 +67,9 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
         /* the other lobes carry the ray on */
         float3 wi, weight;
         float pdf;
-        int label = Bsdf_sample(&f, Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), &wi, &weight, &pdf);
+        /* drawn in a fixed order (a call's arguments are evaluated in none) */
+        float u_lobe = Rng_next(&rng), v1 = Rng_next(&rng), v2 = Rng_next(&rng), v3 = Rng_next(&rng);
+        int label = Bsdf_sample(&f, u_lobe, v1, v2, v3, &wi, &weight, &pdf);
         if (label == 0) return sum;
         throughput *= weight;
         rough = (label & BSDF_LABEL_GLOSSY) && f.rough >= CAUSTIC_ROUGHNESS;

@@ -60,12 +60,16 @@ inline PhotonRay PhotonEmit_mesh(const Emitters *em, int count, float u0, Rng *r
     float3 cr = cross(v1 - v0, v2 - v0);
     float len_cr = length(cr);
     if (!(pick > 0.0f && len_cr > 0.0f)) return r;
-    float2 bc = Sampling_triangle(Rng_next(rng), Rng_next(rng));
+    /* numbers drawn into locals first, here and below: a call's arguments
+     * are evaluated in no set order, and the stream must not depend on it */
+    float b1 = Rng_next(rng), b2 = Rng_next(rng);
+    float2 bc = Sampling_triangle(b1, b2);
     float3 n = cr / len_cr;
     if (Rng_next(rng) < 0.5f) n = -n;
     float eps = Ray_offset(fmax(fmax(Ray_magnitude(v0), Ray_magnitude(v1)), Ray_magnitude(v2)));
     r.org = v0 + bc.x * (v1 - v0) + bc.y * (v2 - v0) + eps * n;
-    r.dir = Sampling_cosine(n, Rng_next(rng), Rng_next(rng));
+    float d1 = Rng_next(rng), d2 = Rng_next(rng);
+    r.dir = Sampling_cosine(n, d1, d2);
     float3 le = em->materials[em->tri_material[tri]].emission.xyz;
     r.power = le * (2.0f * PI_F * 0.5f * len_cr / (pick * (float)count));
     return r;
@@ -79,7 +83,8 @@ inline PhotonRay PhotonEmit_photon(const PhotonEmitter *e, const __global Light 
     float u1 = Rng_next(rng), u2 = Rng_next(rng);
     if (e->light == PHOTON_EMITTER_WORLD) {
         r.dir = PhotonEmit_sphere(u1, u2);
-        r.org = PhotonEmit_disk_origin(sphere, r.dir, Rng_next(rng), Rng_next(rng));
+        float o1 = Rng_next(rng), o2 = Rng_next(rng);
+        r.org = PhotonEmit_disk_origin(sphere, r.dir, o1, o2);
         return r;
     }
     Light l = lights[e->light];
@@ -90,13 +95,15 @@ inline PhotonRay PhotonEmit_photon(const PhotonEmitter *e, const __global Light 
     if (l.kind == LIGHT_SUN) {
         float3 axis = l.direction.xyz;
         r.dir = l.cos_half < 1.0f ? Sampling_cone(axis, l.cos_half, u1, u2) : axis;
-        r.org = PhotonEmit_disk_origin(sphere, axis, Rng_next(rng), Rng_next(rng));
+        float o1 = Rng_next(rng), o2 = Rng_next(rng);
+        r.org = PhotonEmit_disk_origin(sphere, axis, o1, o2);
         return r;
     }
     if (l.kind == LIGHT_AREA) {
         float2 q = l.shape == AREA_ELLIPSE ? 0.5f * Sampling_disk(u1, u2) : (float2)(u1 - 0.5f, u2 - 0.5f);
         r.org = l.position.xyz + q.x * l.axis_u.xyz + q.y * l.axis_v.xyz;
-        r.dir = Sampling_cosine(l.direction.xyz, Rng_next(rng), Rng_next(rng));
+        float d1 = Rng_next(rng), d2 = Rng_next(rng);
+        r.dir = Sampling_cosine(l.direction.xyz, d1, d2);
         return r;
     }
     r.org = l.position.xyz;

@@ -132,7 +132,9 @@ __kernel void Photon_trace(SCENE_PARAMS, const __global PhotonEmitter *emitters,
         if (bounces >= max_bounces) break;
         float3 wi, weight;
         float pdf;
-        int label = Bsdf_sample(&f, Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), Rng_next(&rng), &wi, &weight, &pdf);
+        /* drawn in a fixed order (a call's arguments are evaluated in none) */
+        float u_lobe = Rng_next(&rng), u1 = Rng_next(&rng), u2 = Rng_next(&rng), u3 = Rng_next(&rng);
+        int label = Bsdf_sample(&f, u_lobe, u1, u2, u3, &wi, &weight, &pdf);
         if (label == 0) break;
         bool specular_bounce = (label & BSDF_LABEL_SINGULAR) || ((label & BSDF_LABEL_GLOSSY) && f.rough < CAUSTIC_ROUGHNESS);
         /* the caustic pass follows specular chains only */
