@@ -1,0 +1,213 @@
+"""One final-gather launch, saved on one OpenCL device and replayed alone on
+any: where GI frames fail on one driver and not on another (README, "On an
+NVIDIA H100, a third round"), the same inputs run on both.
+
+    python bench/gather_replay.py save [--device NVIDIA] [--seconds 120] [--watchdog 30]
+    python bench/gather_replay.py run LAUNCH [--device cpu] [--samples FIRST END]
+                                            [--max-specular K] [--out FILE.npz]
+    python bench/gather_replay.py compare A.npz B.npz
+
+``save`` renders the snapshots of ``bench/frame_snapshot.py save`` (box
+with torus and Cornell box at Draft and Final, 64² and 256², a new seed
+each frame) on --device until --seconds have passed, and before every
+launch of ``Gather_samples`` writes what it is given (each buffer read back
+whole, each scalar, the program's defines) to ``.cache/gather_launch.pkl``:
+when a launch faults, the file holds it; when one does not end, the
+watchdog ends the process after --watchdog seconds with every thread's
+stack, and the file holds it too. Without a failure the file is removed.
+
+``run`` launches a saved gather alone on --device, over all its samples or
+``--samples FIRST END``, with its own bounce limit or ``--max-specular``,
+and prints its time and each output's sums; ``--out`` keeps each sample's
+irradiance, harmonic hit distance and hit count. ``compare`` prints where
+two such files differ. The argument order is ``Gather_samples``' in
+``gpu_core/gi/gather.cl`` (a test replays a saved launch against the
+render it came from).
+"""
+
+from __future__ import annotations
+
+import argparse
+import faulthandler
+import os
+import pickle
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+import pyopencl as cl
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from gpu_core.device import get_device  # noqa: E402
+from gpu_core.device.device import Device  # noqa: E402
+from gpu_core.device.kernels import Kernel  # noqa: E402
+
+LAUNCH = os.path.join(ROOT, ".cache", "gather_launch.pkl")
+SNAPSHOTS = os.path.join(ROOT, ".cache", "snapshots")
+KERNEL = "Gather_samples"
+JOBS = [("box_torus", "draft", 64), ("box_torus", "draft", 256), ("cornell_box", "final", 256),
+        ("box_torus", "final", 128), ("cornell_box", "draft", 64)]
+# positions from the end of Gather_samples' arguments
+FIRST, END, MAX_SPECULAR, IRRADIANCE, DISTANCE, HITS = -8, -7, -5, -3, -2, -1
+
+
+# ---- save ----------------------------------------------------------------------------------
+
+
+class LaunchRecorder:
+    """While active, every launch of Gather_samples first writes its inputs
+    to ``path`` (the queue finished before they are read back)."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self._programs = {}
+
+    def __enter__(self):
+        self._kernel, self._enqueue = Device.kernel, Kernel._enqueue
+        recorder = self
+
+        def kernel(device, program, name, defines=None):
+            made = recorder._kernel(device, program, name, defines)
+            if name == KERNEL:
+                recorder._programs[id(made)] = (program, dict(defines or {}))
+            return made
+
+        def enqueue(launched, global_size, group, args):
+            if launched.name == KERNEL:
+                recorder.write(launched, group, args)
+            return recorder._enqueue(launched, global_size, group, args)
+
+        Device.kernel, Kernel._enqueue = kernel, enqueue
+        return self
+
+    def __exit__(self, *exc):
+        Device.kernel, Kernel._enqueue = self._kernel, self._enqueue
+
+    def write(self, launched: Kernel, group: int, args) -> None:
+        launched.queue.finish()
+        saved = []
+        for arg in args:
+            if isinstance(arg, cl.MemoryObjectHolder):
+                host = np.empty(arg.get_info(cl.mem_info.SIZE), np.uint8)
+                cl.enqueue_copy(launched.queue, host, arg)
+                saved.append(("buffer", host))
+            else:
+                saved.append(arg)
+        program, defines = self._programs[id(launched)]
+        with open(self.path, "wb") as f:
+            pickle.dump(dict(program=program, defines=defines, group=group, args=saved), f)
+
+
+def save(device_spec: str | None, seconds: float, watchdog: float) -> None:
+    """Frames until --seconds pass, each gather launch saved before it runs."""
+    from gpu_core.renderer import Renderer
+
+    device = get_device(device_spec)
+    os.makedirs(os.path.dirname(LAUNCH), exist_ok=True)
+    began, frame = time.perf_counter(), 0
+    with LaunchRecorder(LAUNCH):
+        while time.perf_counter() - began < seconds:
+            name, preset, size = JOBS[frame % len(JOBS)]
+            with open(os.path.join(SNAPSHOTS, f"{name}.pkl"), "rb") as f:
+                snapshot = pickle.load(f)
+            scene = snapshot["exports"][256]
+            scene = replace(scene, camera=replace(scene.camera, width=size, height=size, border=None))
+            settings = replace(snapshot["settings"][preset], denoise=False, seed=frame)
+            # the first frames compile their programs
+            faulthandler.dump_traceback_later(watchdog + (300 if frame < len(JOBS) else 0), exit=True)
+            start = time.perf_counter()
+            result = Renderer(device).render(scene, settings)
+            faulthandler.cancel_dump_traceback_later()
+            print(f"frame {frame} {name} {preset} {size}²: {(time.perf_counter() - start) * 1e3:.0f} ms, "
+                  f"gather {result.stats['ms'].get('gather', 0.0):.0f} ms", flush=True)
+            frame += 1
+    os.remove(LAUNCH)
+    print(f"{frame} frames, no gather failed", flush=True)
+
+
+# ---- run and compare ---------------------------------------------------------------------------
+
+
+def replay(device, launch: dict, first: int | None = None, end: int | None = None,
+           max_specular: int | None = None) -> dict:
+    """Launch a saved gather alone: each sample's outputs (first .. end)."""
+    flags = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
+    args = [cl.Buffer(device.context, flags, hostbuf=a[1]) if isinstance(a, tuple) else a for a in launch["args"]]
+    first = int(args[FIRST]) if first is None else first
+    end = int(args[END]) if end is None else end
+    args[FIRST], args[END] = np.int32(first), np.int32(end)
+    if max_specular is not None:
+        args[MAX_SPECULAR] = np.int32(max_specular)
+    kernel = device.kernel(launch["program"], KERNEL, launch["defines"])
+    began = time.perf_counter()
+    kernel.groups(end - first, launch["group"], *args)
+    device.queue.finish()
+    seconds = time.perf_counter() - began
+    out = {}
+    for key, at, dtype, width in (("irradiance", IRRADIANCE, np.float32, 4), ("distance", DISTANCE, np.float32, 1),
+                                  ("hits", HITS, np.int32, 1)):
+        host = np.empty(end * width, dtype)
+        cl.enqueue_copy(device.queue, host, args[at])
+        out[key] = host.reshape(end, width)[first:, :3] if width > 1 else host[first:]
+    return dict(first=first, end=end, seconds=seconds, **out)
+
+
+def run(path: str, device_spec: str | None, samples, max_specular: int | None, out: str | None) -> None:
+    device = get_device(device_spec)
+    with open(path, "rb") as f:
+        launch = pickle.load(f)
+    first, end = samples if samples else (None, None)
+    result = replay(device, launch, first, end, max_specular)
+    rays = int(launch["args"][FIRST + 2]) ** 2
+    print(f"{device.name}: samples {result['first']}..{result['end']} in {result['seconds'] * 1e3:.1f} ms; "
+          f"irradiance finite {bool(np.isfinite(result['irradiance']).all())}, sum "
+          f"{float(result['irradiance'].sum()):.6g}; rays reaching a diffuse surface "
+          f"{result['hits'].sum() / (rays * len(result['hits'])):.5f}")
+    if out:
+        np.savez(out, **{k: v for k, v in result.items()}, device=device.name)
+
+
+def compare(a_path: str, b_path: str) -> None:
+    a, b = np.load(a_path), np.load(b_path)
+    assert int(a["first"]) == int(b["first"]) and int(a["end"]) == int(b["end"]), "not the same samples"
+    first = int(a["first"])
+    hits = np.flatnonzero(a["hits"] != b["hits"])
+    scale = np.maximum(np.abs(a["irradiance"]).max(axis=1), 1e-30)
+    rel = np.abs(a["irradiance"] - b["irradiance"]).max(axis=1) / scale
+    print(f"{a['device']} against {b['device']}: hit counts differ at {len(hits)} of {len(rel)} samples; "
+          f"irradiance rel. difference median {np.median(rel):.2e}, max {rel.max():.2e}")
+    for i in np.argsort(-rel)[:10]:
+        print(f"  sample {first + i}: hits {a['hits'][i]} / {b['hits'][i]}, irradiance {a['irradiance'][i]} / "
+              f"{b['irradiance'][i]}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    saving = sub.add_parser("save")
+    saving.add_argument("--device", default=None)
+    saving.add_argument("--seconds", type=float, default=120.0)
+    saving.add_argument("--watchdog", type=float, default=30.0)
+    running = sub.add_parser("run")
+    running.add_argument("launch")
+    running.add_argument("--device", default=None)
+    running.add_argument("--samples", nargs=2, type=int, metavar=("FIRST", "END"))
+    running.add_argument("--max-specular", type=int)
+    running.add_argument("--out")
+    comparing = sub.add_parser("compare")
+    comparing.add_argument("a")
+    comparing.add_argument("b")
+    args = parser.parse_args()
+    if args.command == "save":
+        save(args.device, args.seconds, args.watchdog)
+    elif args.command == "run":
+        run(args.launch, args.device, args.samples, args.max_specular, args.out)
+    else:
+        compare(args.a, args.b)
+
+
+if __name__ == "__main__":
+    main()
