@@ -51,7 +51,7 @@ KERNEL = "Gather_samples"
 JOBS = [("box_torus", "draft", 64), ("box_torus", "draft", 256), ("cornell_box", "final", 256),
         ("box_torus", "final", 128), ("cornell_box", "draft", 64)]
 # positions from the end of Gather_samples' arguments
-FIRST, END, MAX_SPECULAR, IRRADIANCE, DISTANCE, HITS = -8, -7, -5, -3, -2, -1
+FIRST, END, MAX_SPECULAR, IRRADIANCE, DISTANCE, HITS = -10, -9, -7, -4, -3, -2
 
 
 # ---- save ----------------------------------------------------------------------------------

@@ -71,6 +71,7 @@ class CacheRecords:
     nrm: cl.Buffer  # float4 per record, unit
     e: cl.Buffer  # float4 per record: irradiance (outliers clamped)
     r: cl.Buffer  # float per record: harmonic mean distance R_j (neighbour-clamped)
+    grad: cl.Buffer  # three float4 per record: translational irradiance gradient (gather.GatherResult)
     count: int
 
 
@@ -132,7 +133,8 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         with timer.stage("coverage"):
             flag = device.empty(4 * n)
             prior, _ = interpolation.interpolate_on_device(device, records.pos, records.nrm, records.e, records.r,
-                                                           records.count, points.pos, points.nrm, n, flag=flag)
+                                                           records.count, points.pos, points.nrm, n, flag=flag,
+                                                           sgrad=records.grad)
             index, left = interpolation.uncovered(device, flag, n)
             todo, kept = shading_points.subset(points, index, left), records.count
         check_stop(should_stop)
@@ -160,7 +162,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         check_stop(should_stop)
         with timer.stage("interpolate"):
             checked = neighbours.check(device, chosen.pos, gathered.e, gathered.distance, chosen.count)
-        new = CacheRecords(chosen.pos, chosen.nrm, checked.irradiance, checked.radii, chosen.count)
+        new = CacheRecords(chosen.pos, chosen.nrm, checked.irradiance, checked.radii, gathered.gradient, chosen.count)
         stats.update(sample_points=chosen.count, sample_points_reused=samples_reused,
                      selection={key: chosen.stats.get(key) for key in _SELECTION_STATS},
                      cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
@@ -171,12 +173,14 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
     with timer.stage("interpolate"):
         if index is None:
             irradiance, interp = interpolation.interpolate_on_device(
-                device, merged.pos, merged.nrm, merged.e, merged.r, merged.count, points.pos, points.nrm, n)
+                device, merged.pos, merged.nrm, merged.e, merged.r, merged.count, points.pos, points.nrm, n,
+                sgrad=merged.grad)
         else:  # covered points keep the records' value; the others are interpolated from all records
             irradiance, interp = prior, {}
             if todo.count:
                 filled, interp = interpolation.interpolate_on_device(
-                    device, merged.pos, merged.nrm, merged.e, merged.r, merged.count, todo.pos, todo.nrm, todo.count)
+                    device, merged.pos, merged.nrm, merged.e, merged.r, merged.count, todo.pos, todo.nrm, todo.count,
+                    sgrad=merged.grad)
                 primitives.scatter_rows(device, filled, index, todo.count, irradiance)
     stats["interpolation"] = {k: v for k, v in interp.items() if k != "ms"}
     return irradiance, merged
@@ -188,7 +192,7 @@ def _merged(device: Device, kept: CacheRecords | None, new: CacheRecords | None)
         return kept or new
     parts = [(kept, kept.count), (new, new.count)]
     return CacheRecords(*(primitives.concatenated(device, [(getattr(r, name), c) for r, c in parts], size)
-                          for name, size in (("pos", 16), ("nrm", 16), ("e", 16), ("r", 4))),
+                          for name, size in (("pos", 16), ("nrm", 16), ("e", 16), ("r", 4), ("grad", 48))),
                         kept.count + new.count)
 
 

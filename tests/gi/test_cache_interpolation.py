@@ -7,7 +7,7 @@ import pytest
 from cache_shapes import shading_points
 
 from gpu_core.gi.cache.interpolation import interpolate
-from gpu_core.gi.cache.interpolation import BEHIND, COVER
+from gpu_core.gi.cache.interpolation import BEHIND, COVER, GRADIENT_LIMIT
 
 SIZE = 64
 TIE = 1e-6  # CACHE_TIE (normalised units): nearer samples within it tie, lowest index wins
@@ -125,6 +125,26 @@ def test_one_sample_gives_its_irradiance_everywhere_it_faces(device):
     got, stats = interpolate(device, pos[:1], nrm[:1], np.array([[3.0, 2.0, 1.0]]), np.array([0.1]), pos, nrm)
     assert (got == np.array([3.0, 2.0, 1.0], np.float32)).all()
     assert 0.0 < stats["covered"] < 1.0
+
+
+def test_a_sample_gradient_carries_its_irradiance_to_a_point_up_to_its_limit(device):
+    # one sample at the origin facing up, R_j = 1 (it covers 0.5 around it), E_j = (1, 2, 4)
+    spos, snrm, e, r = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 2.0, 4.0]]), np.array([1.0])
+    pts = np.array([[0.3, 0.0, 0.0], [0.0, -0.2, 0.0], [-0.4, 0.1, 0.0]])
+    grad = np.zeros((1, 3, 3))  # channel, axis
+    grad[0, 0, 0] = 0.2  # red: 0.2 over R_j, within the limit of 0.5 x 1
+    grad[0, 1, 1] = 5.0  # green: 5 over R_j, scaled down to 0.5 x 2
+    grad[0, 2, 0] = -2.0  # blue: 2 over R_j, just the limit of 0.5 x 4
+    got, stats = interpolate(device, spos, snrm, e, r, pts, np.repeat(snrm, 3, axis=0), samples_grad=grad)
+    assert stats["covered"] == 1.0
+    green = GRADIENT_LIMIT * 2.0  # the gradient's length after the limit
+    expected = [[1.0 + 0.2 * 0.3, 2.0, 4.0 - 2.0 * 0.3],
+                [1.0, 2.0 - green * 0.2, 4.0],
+                [1.0 - 0.2 * 0.4, 2.0 + green * 0.1, 4.0 + 2.0 * 0.4]]
+    np.testing.assert_allclose(got, expected, rtol=1e-5)
+    # without gradients the sample's value, unchanged
+    plain, _ = interpolate(device, spos, snrm, e, r, pts, np.repeat(snrm, 3, axis=0))
+    assert (plain == np.array([1.0, 2.0, 4.0], np.float32)).all()
 
 
 def test_extreme_irradiance_and_distances_stay_finite(device):

@@ -47,8 +47,36 @@ def test_gather_in_a_closed_box_returns_albedo_times_the_irradiance_it_is_given(
                            constant_cut(device, 2.0))
     assert result.stats["hit_fraction"] == 1.0  # nothing escapes a closed box
     np.testing.assert_allclose(result.irradiance, 0.5 * 2.0, rtol=1e-5)
+    assert (result.translational_gradient == 0.0).all()  # the same light everywhere
     # every hit lies inside the 2 m box, at most its diagonal away
     assert np.all((result.harmonic_distance > 0) & (result.harmonic_distance < 2 * np.sqrt(3)))
+
+
+def test_gather_gradient_matches_finite_differences_of_the_gathered_irradiance(device):
+    # in the closed box, the wall at x = +1 lit ten times brighter (red; green five, blue alike)
+    scene, up = on_device(device, box_scene(albedo=0.5))
+    normals = np.concatenate([np.eye(3), -np.eye(3)])
+    lit = np.ones((6, 3))
+    lit[3] = (10.0, 5.0, 1.0)
+    the_cut = cut.Cut.from_nodes(device, np.zeros((6, 3)), normals, np.full(6, 100.0), lit)
+    up_normal = np.array([0.0, 0.0, 1.0])
+
+    def at(p, seeds=range(8)):
+        """Irradiance and gradient at p (normal +z), means over seeds of 32 x 32 rays."""
+        runs = [gather.gather(device, up, device.to_device(float4_rows([p])), device.to_device(float4_rows([up_normal])),
+                              1, 32, the_cut, seed=seed) for seed in seeds]
+        return (np.mean([r.irradiance[0] for r in runs], axis=0),
+                np.mean([r.translational_gradient[0] for r in runs], axis=0))
+    p, h = np.array([0.3, 0.2, -0.5]), 0.02
+    _, gradient = at(p)
+    fd = np.stack([(at(p + h * axis)[0] - at(p - h * axis)[0]) / (2 * h) for axis in np.eye(3)[:2]], axis=1)
+    assert (gradient[:, 2] == 0.0).all()  # it lies in the tangent plane
+    assert (gradient[2] == 0.0).all() and np.abs(fd[2]).max() < 1e-3  # blue is the same everywhere
+    for channel in range(2):  # red and green: towards the bright wall, as the differences say
+        g, d = gradient[channel, :2], fd[channel]
+        assert g[0] > 0.0
+        assert abs(np.linalg.norm(g) / np.linalg.norm(d) - 1.0) < 0.15
+        assert np.dot(g, d) / (np.linalg.norm(g) * np.linalg.norm(d)) > np.cos(np.radians(6.0))
 
 
 def test_shading_points_look_through_mirrors_to_the_surfaces_they_show(device):

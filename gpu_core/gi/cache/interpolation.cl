@@ -77,13 +77,32 @@ __kernel void Cache_sample_cells(const __global float4 *spos, const int m, const
  * slots of each bucket (bucket_items[bucket_start[b] .. bucket_end[b])). */
 #define CACHE_HASH_PARAMS                                                    \
     const __global float4 *spos, const __global float4 *snrm, const __global float4 *sirr,          \
+        const __global float4 *sgrad, const float grad_scale,                                       \
         const __global float *srad, const __global int4 *cells, const __global int *bucket_start, \
         const __global int *bucket_end, const __global int *bucket_items, const uint mask, const uint levels
 
+/* Sample j's irradiance carried to x by its translational gradient (Ward
+ * and Heckbert: three rows dE/dx, dE/dy, dE/dz, rgb, in scene units) over
+ * the offset d (frame units, grad_scale scene units each). Each channel's
+ * gradient is scaled down to change it by at most CACHE_GRADIENT_LIMIT of
+ * its value over R_j (rj, frame units; Krivanek et al. 2006 limit it with
+ * neighbour clamping, whose R_j it takes), and the result is never
+ * negative. */
+inline float3 Cache_extrapolated(const __global float4 *sirr, const __global float4 *sgrad, float grad_scale, int j,
+                                 float3 d, float rj) {
+    const __global float4 *g = sgrad + 3 * j;
+    float3 e = sirr[j].xyz;
+    float3 size = sqrt(g[0].xyz * g[0].xyz + g[1].xyz * g[1].xyz + g[2].xyz * g[2].xyz) * (rj * grad_scale);
+    float3 scale = fmin((float3)(1.0f), CACHE_GRADIENT_LIMIT * e / fmax(size, 1e-30f));
+    float3 step = d * grad_scale;
+    return fmax(e + scale * (step.x * g[0].xyz + step.y * g[1].xyz + step.z * g[2].xyz), (float3)(0.0f));
+}
+
 /* Ward's weighted mean over the samples covering x (normal nx) that face
- * its way and do not lie in front of it; the summed weight goes to *wsum
- * (0 when none covers it). A running mean cannot overflow, and samples of
- * equal irradiance leave it exactly at that value. */
+ * its way and do not lie in front of it, each carried to x by its gradient;
+ * the summed weight goes to *wsum (0 when none covers it). A running mean
+ * cannot overflow, and samples of equal irradiance and no gradient leave it
+ * exactly at that value. */
 inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float behind, float *wsum) {
     float3 mean = (float3)(0.0f);
     *wsum = 0.0f;
@@ -105,7 +124,8 @@ inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float 
             float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
             *wsum += w;
             /* the first sample is taken as it is (w / w need not round to 1) */
-            mean = *wsum == w ? sirr[j].xyz : mean + (w / *wsum) * (sirr[j].xyz - mean);
+            float3 e = Cache_extrapolated(sirr, sgrad, grad_scale, j, d, rj);
+            mean = *wsum == w ? e : mean + (w / *wsum) * (e - mean);
         }
     }
     return mean;
@@ -170,8 +190,8 @@ __kernel void Cache_interpolate(const __global float4 *pos, const __global float
     if (i >= n) return;
     float3 x = pos[i].xyz, nx = nrm[i].xyz;
     float wsum;
-    float3 mean = Cache_covering_mean(spos, snrm, sirr, srad, cells, bucket_start, bucket_end, bucket_items, mask,
-                                      levels, x, nx, behind, &wsum);
+    float3 mean = Cache_covering_mean(spos, snrm, sirr, sgrad, grad_scale, srad, cells, bucket_start, bucket_end,
+                                      bucket_items, mask, levels, x, nx, behind, &wsum);
     if (wsum > 0.0f) {
         out[i] = (float4)(mean, 0.0f);
         flag[i] = 1;
