@@ -127,7 +127,7 @@ def test_one_sample_gives_its_irradiance_everywhere_it_faces(device):
     assert 0.0 < stats["covered"] < 1.0
 
 
-def test_a_sample_gradient_carries_its_irradiance_to_a_point_up_to_its_limit(device):
+def test_a_sample_gradient_carries_its_irradiance_to_a_point_up_to_its_limit_and_coverage(device):
     # one sample at the origin facing up, R_j = 1 (it covers 0.5 around it), E_j = (1, 2, 4)
     spos, snrm, e, r = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 2.0, 4.0]]), np.array([1.0])
     pts = np.array([[0.3, 0.0, 0.0], [0.0, -0.2, 0.0], [-0.4, 0.1, 0.0]])
@@ -145,6 +145,13 @@ def test_a_sample_gradient_carries_its_irradiance_to_a_point_up_to_its_limit(dev
     # without gradients the sample's value, unchanged
     plain, _ = interpolate(device, spos, snrm, e, r, pts, np.repeat(snrm, 3, axis=0))
     assert (plain == np.array([1.0, 2.0, 4.0], np.float32)).all()
+    # a point past its coverage (0.5) takes it carried from the edge of its coverage
+    far, stats = interpolate(device, spos, snrm, e, r, np.array([[2.0, 0.0, 0.0]]), snrm, samples_grad=grad)
+    assert stats["covered"] == 0.0 and stats["fallback"] == 1
+    np.testing.assert_allclose(far, [[1.0 + 0.2 * COVER, 2.0, 4.0 - 2.0 * COVER]], rtol=1e-5)
+    # and one that faces away from it, its value as it is
+    away, _ = interpolate(device, spos, snrm, e, r, np.array([[0.1, 0.0, 0.0]]), -snrm, samples_grad=grad)
+    assert (away == np.array([1.0, 2.0, 4.0], np.float32)).all()
 
 
 def test_extreme_irradiance_and_distances_stay_finite(device):

@@ -6,8 +6,8 @@
  * on the level whose cells are at least its radius across (at most 3 per
  * axis: CACHE_SLOTS cells, from the host), so a query visits one cell, its
  * own, on each level in use. Points no sample covers take the nearest
- * sample with a compatible normal, else the nearest one
- * (gpu_core/gi/cache/interpolation.py). */
+ * sample with a compatible normal (carried by its gradient from the edge
+ * of its coverage), else the nearest one (gpu_core/gi/cache/interpolation.py). */
 #include "device/launch.h"
 #include "gi/cache/cache.h"
 
@@ -200,7 +200,16 @@ __kernel void Cache_interpolate(const __global float4 *pos, const __global float
     bool compatible;
     int pick = Cache_nearest_sample(spos, snrm, grid_origin, grid_dims, grid_start, grid_end, grid_items, m, x, nx,
                                     &compatible);
-    out[i] = pick >= 0 ? (float4)(sirr[pick].xyz, 0.0f) : (float4)(0.0f);
+    float3 e = (float3)(0.0f);
+    if (pick >= 0 && compatible) {
+        /* carried by its gradient as if from the edge of its coverage */
+        float3 d = x - spos[pick].xyz;
+        float len = length(d), cover = spos[pick].w;
+        e = Cache_extrapolated(sirr, sgrad, grad_scale, pick, len > cover ? d * (cover / len) : d, srad[pick]);
+    } else if (pick >= 0) {
+        e = sirr[pick].xyz;
+    }
+    out[i] = (float4)(e, 0.0f);
     flag[i] = pick < 0 ? 0 : (compatible ? 2 : 3);
 }
 

@@ -3,7 +3,8 @@
     E(x) = sum_j w_j E_j(x) / sum_j w_j,  w_j = 1 / (|x - x_j| / R_j + sqrt(2 - 2 n . n_j))
 
 with E_j(x) = E_j + (x - x_j) . grad E_j where the samples' translational
-gradients are given (bounded: GRADIENT_LIMIT),
+gradients are given (bounded: GRADIENT_LIMIT; a point no sample covers
+takes its nearest facing sample's carried from the edge of its coverage),
 
 over the samples j with |x - x_j| < a R_j, n . n_j > 0.01 and x not behind
 them, (x - x_j) . (n + n_j) >= -behind R_j. A point no sample covers takes
