@@ -63,8 +63,8 @@ def test_gather_gradient_matches_finite_differences_of_the_gathered_irradiance(d
 
     def at(p, seeds=range(8)):
         """Irradiance and gradient at p (normal +z), means over seeds of 32 x 32 rays."""
-        runs = [gather.gather(device, up, device.to_device(float4_rows([p])), device.to_device(float4_rows([up_normal])),
-                              1, 32, the_cut, seed=seed) for seed in seeds]
+        point, normal = device.to_device(float4_rows([p])), device.to_device(float4_rows([up_normal]))
+        runs = [gather.gather(device, up, point, normal, 1, 32, the_cut, seed=seed) for seed in seeds]
         return (np.mean([r.irradiance[0] for r in runs], axis=0),
                 np.mean([r.translational_gradient[0] for r in runs], axis=0))
     p, h = np.array([0.3, 0.2, -0.5]), 0.02

@@ -38,11 +38,17 @@ inline uint Cache_bucket(int4 cell, uint mask) {
 }
 
 /* Samples into the cache's frame: position (p - centre) / extent with w the
- * coverage radius a R_j, and R_j / extent, bounded (a zero, negative or NaN
- * R_j takes the smallest radius, an infinite one the largest). */
-__kernel void Cache_prepare_samples(const __global float4 *spos, const __global float *srad, const int m,
+ * coverage radius a R_j, R_j / extent, bounded (a zero, negative or NaN
+ * R_j takes the smallest radius, an infinite one the largest), and the
+ * translational gradient's rows (dE/dx, dE/dy, dE/dz, rgb, in scene units)
+ * per frame unit, each channel's scaled down to change E_j by at most
+ * CACHE_GRADIENT_LIMIT of its value over R_j (Krivanek et al. 2006 bound it
+ * beside neighbour clamping, whose R_j it takes). */
+__kernel void Cache_prepare_samples(const __global float4 *spos, const __global float *srad,
+                                    const __global float4 *sirr, const __global float4 *sgrad, const int m,
                                     const float4 centre_high, const float4 centre_low, const float extent,
-                                    const float a, __global float4 *out_pos, __global float *out_rad) {
+                                    const float a, __global float4 *out_pos, __global float *out_rad,
+                                    __global float4 *out_grad) {
     int j = Launch_global_id();
     if (j >= m) return;
     float r = srad[j] / extent;
@@ -50,6 +56,12 @@ __kernel void Cache_prepare_samples(const __global float4 *spos, const __global 
     float3 d = (spos[j].xyz - centre_high.xyz) - centre_low.xyz;
     out_pos[j] = (float4)(d / extent, fmin(a * r, CACHE_MAX_COVER));
     out_rad[j] = r;
+    float4 gx = sgrad[3 * j], gy = sgrad[3 * j + 1], gz = sgrad[3 * j + 2];
+    float3 size = sqrt(gx.xyz * gx.xyz + gy.xyz * gy.xyz + gz.xyz * gz.xyz) * (r * extent);
+    float3 scale = fmin((float3)(1.0f), CACHE_GRADIENT_LIMIT * sirr[j].xyz / fmax(size, 1e-30f)) * extent;
+    out_grad[3 * j] = (float4)(gx.xyz * scale, 0.0f);
+    out_grad[3 * j + 1] = (float4)(gy.xyz * scale, 0.0f);
+    out_grad[3 * j + 2] = (float4)(gz.xyz * scale, 0.0f);
 }
 
 /* The cells of each sample's level that the box of its coverage sphere
@@ -77,25 +89,15 @@ __kernel void Cache_sample_cells(const __global float4 *spos, const int m, const
  * slots of each bucket (bucket_items[bucket_start[b] .. bucket_end[b])). */
 #define CACHE_HASH_PARAMS                                                    \
     const __global float4 *spos, const __global float4 *snrm, const __global float4 *sirr,          \
-        const __global float4 *sgrad, const float grad_scale,                                       \
+        const __global float4 *sgrad,                                                               \
         const __global float *srad, const __global int4 *cells, const __global int *bucket_start, \
         const __global int *bucket_end, const __global int *bucket_items, const uint mask, const uint levels
 
-/* Sample j's irradiance carried to x by its translational gradient (Ward
- * and Heckbert: three rows dE/dx, dE/dy, dE/dz, rgb, in scene units) over
- * the offset d (frame units, grad_scale scene units each). Each channel's
- * gradient is scaled down to change it by at most CACHE_GRADIENT_LIMIT of
- * its value over R_j (rj, frame units; Krivanek et al. 2006 limit it with
- * neighbour clamping, whose R_j it takes), and the result is never
- * negative. */
-inline float3 Cache_extrapolated(const __global float4 *sirr, const __global float4 *sgrad, float grad_scale, int j,
-                                 float3 d, float rj) {
+/* Sample j's irradiance carried to x by its bounded gradient (rows per
+ * frame unit: Cache_prepare_samples) over the offset d, never negative. */
+inline float3 Cache_extrapolated(const __global float4 *sirr, const __global float4 *sgrad, int j, float3 d) {
     const __global float4 *g = sgrad + 3 * j;
-    float3 e = sirr[j].xyz;
-    float3 size = sqrt(g[0].xyz * g[0].xyz + g[1].xyz * g[1].xyz + g[2].xyz * g[2].xyz) * (rj * grad_scale);
-    float3 scale = fmin((float3)(1.0f), CACHE_GRADIENT_LIMIT * e / fmax(size, 1e-30f));
-    float3 step = d * grad_scale;
-    return fmax(e + scale * (step.x * g[0].xyz + step.y * g[1].xyz + step.z * g[2].xyz), (float3)(0.0f));
+    return fmax(sirr[j].xyz + d.x * g[0].xyz + d.y * g[1].xyz + d.z * g[2].xyz, (float3)(0.0f));
 }
 
 /* Ward's weighted mean over the samples covering x (normal nx) that face
@@ -124,7 +126,7 @@ inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float 
             float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
             *wsum += w;
             /* the first sample is taken as it is (w / w need not round to 1) */
-            float3 e = Cache_extrapolated(sirr, sgrad, grad_scale, j, d, rj);
+            float3 e = Cache_extrapolated(sirr, sgrad, j, d);
             mean = *wsum == w ? e : mean + (w / *wsum) * (e - mean);
         }
     }
@@ -190,7 +192,7 @@ __kernel void Cache_interpolate(const __global float4 *pos, const __global float
     if (i >= n) return;
     float3 x = pos[i].xyz, nx = nrm[i].xyz;
     float wsum;
-    float3 mean = Cache_covering_mean(spos, snrm, sirr, sgrad, grad_scale, srad, cells, bucket_start, bucket_end,
+    float3 mean = Cache_covering_mean(spos, snrm, sirr, sgrad, srad, cells, bucket_start, bucket_end,
                                       bucket_items, mask, levels, x, nx, behind, &wsum);
     if (wsum > 0.0f) {
         out[i] = (float4)(mean, 0.0f);
@@ -205,7 +207,7 @@ __kernel void Cache_interpolate(const __global float4 *pos, const __global float
         /* carried by its gradient as if from the edge of its coverage */
         float3 d = x - spos[pick].xyz;
         float len = length(d), cover = spos[pick].w;
-        e = Cache_extrapolated(sirr, sgrad, grad_scale, pick, len > cover ? d * (cover / len) : d, srad[pick]);
+        e = Cache_extrapolated(sirr, sgrad, pick, len > cover ? d * (cover / len) : d);
     } else if (pick >= 0) {
         e = sirr[pick].xyz;
     }

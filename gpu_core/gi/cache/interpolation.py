@@ -79,11 +79,12 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
         frame = Frame.on_device(device, (spos, m), (pos, n))
         high = frame.centre.astype(np.float32)
         low = (frame.centre - high).astype(np.float32)
-        # samples in the frame, w = coverage radius a R_j; R_j in frame units
-        d_spos, d_srad = device.empty(16 * m), device.empty(4 * m)
+        # samples in the frame, w = coverage radius a R_j; R_j and the bounded gradients in frame units
+        d_spos, d_srad, d_sgrad = device.empty(16 * m), device.empty(4 * m), device.empty(48 * m)
+        sgrad = device.zeros(48 * m) if sgrad is None else sgrad
         _k(device, "Cache_prepare_samples")(
-            m, spos, srad, np.int32(m), np.append(high, 0).astype(np.float32), np.append(low, 0).astype(np.float32),
-            np.float32(frame.extent), np.float32(a), d_spos, d_srad)
+            m, spos, srad, sirr, sgrad, np.int32(m), np.append(high, 0).astype(np.float32),
+            np.append(low, 0).astype(np.float32), np.float32(frame.extent), np.float32(a), d_spos, d_srad, d_sgrad)
         d_pos = frame.normalise(device, pos, n)
         # hash grid of coverage spheres, one level per power-of-two radius:
         # each sample listed in up to _SLOTS cells, about 16 buckets a sample
@@ -98,11 +99,10 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
         grid = cache_grid.build(device, d_spos, m, lo[:3], hi[:3], m)
     with timer.stage("interpolate"):
         flag = device.empty(4 * n) if flag is None else flag
-        sgrad = device.zeros(48 * m) if sgrad is None else sgrad
         _k(device, "Cache_interpolate")(
-            n, d_pos, nrm, np.int32(n), d_spos, snrm, sirr, sgrad, np.float32(frame.extent), d_srad, cells, buckets.start, buckets.end, buckets.order,
-            np.uint32(table - 1), np.uint32(level_bits), *grid.kernel_args(), np.int32(m), np.float32(behind), out,
-            flag)
+            n, d_pos, nrm, np.int32(n), d_spos, snrm, sirr, d_sgrad, d_srad, cells, buckets.start, buckets.end,
+            buckets.order, np.uint32(table - 1), np.uint32(level_bits), *grid.kernel_args(), np.int32(m),
+            np.float32(behind), out, flag)
         kinds = _flag_counts(device, flag, n)
     stats.update(covered=float(kinds[1]) / n, fallback=int(kinds[2] + kinds[3]), fallback_any_normal=int(kinds[3]))
     stats["ms"]["total"] = timer.ms["build"] + timer.ms["interpolate"]
