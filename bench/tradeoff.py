@@ -4,7 +4,9 @@ For each scene, a high-sample Cycles render with a 1-pixel box filter is
 the reference, rendered here once and kept in bench/results/ (the tests'
 stored references have Blender's default film instead). Then, in the same run: Cycles at 4..1024
 samples with and without its denoiser (set up like the reference: box
-filter, no clamp, no glossy filter, deep bounces), GPU GI's presets as
+filter, no clamp, no glossy filter, deep bounces), Cycles with adaptive
+sampling at 16 and 64 (its default threshold 0.01, a quarter of the
+samples first, as GPU GI's presets take them), GPU GI's presets as
 rendered and denoised (Open Image Denoise from the albedo and normal
 passes, as Cycles' denoiser), and a sweep of its main knobs from the
 Preview preset, all with the reference's 1-pixel box filter. Each
@@ -48,6 +50,8 @@ from test_gi_vs_cycles import display  # noqa: E402
 
 FIGURE = os.path.join(ROOT, "bench", "figures", "tradeoff.png")
 CYCLES_SAMPLES = (4, 16, 64, 256, 1024)
+CYCLES_ADAPTIVE = (16, 64)  # samples of the Cycles rows with adaptive sampling
+CYCLES_THRESHOLD = 0.01  # Cycles' default noise threshold
 PRESETS = ("DRAFT", "PREVIEW", "FINAL")
 SWEEPS = {  # knob -> values, each applied on top of the Preview preset
     "samples": (4, 16, 64),
@@ -56,6 +60,7 @@ SWEEPS = {  # knob -> values, each applied on top of the Preview preset
     "gather_rays": (64, 256, 1024),
     "photon_k": (20, 50, 100),
     "gi_subpixels": (1, 2),
+    "noise_threshold": (0.0, 0.005, 0.02),
 }
 
 
@@ -79,9 +84,12 @@ def errors(image: np.ndarray, reference: np.ndarray) -> dict:
                 linear=relative_rmse(image, reference))
 
 
-def cycles_settings(scene, samples: int, denoise: bool) -> None:
+def cycles_settings(scene, samples: int, denoise: bool, adaptive: bool = False) -> None:
     cycles_reference_settings(scene, scene.render.resolution_x, samples, box_filter=True)
     scene.cycles.use_denoising = denoise
+    if adaptive:
+        scene.cycles.use_adaptive_sampling = True
+        scene.cycles.adaptive_threshold, scene.cycles.adaptive_min_samples = CYCLES_THRESHOLD, samples // 4
 
 
 def reference(bpy, name: str, size: int, samples: int) -> np.ndarray:
@@ -133,6 +141,12 @@ def run_scene(bpy, name: str, args) -> list[dict]:
                                    lambda s: cycles_settings(s, samples, denoise), repeats)
             rows.append(dict(scene=name, engine="Cycles" + (" denoised" if denoise else ""),
                              config=f"{samples} spp", seconds=seconds, **errors(image, ref)))
+    for samples in CYCLES_ADAPTIVE:
+        for denoise in (False, True):
+            image, seconds = timed(bpy, name, args.size, "CYCLES",
+                                   lambda s: cycles_settings(s, samples, denoise, adaptive=True), args.repeats)
+            rows.append(dict(scene=name, engine="Cycles adaptive" + (" denoised" if denoise else ""),
+                             config=f"{samples} spp", seconds=seconds, **errors(image, ref)))
     for denoise in (False, True):
         for preset in PRESETS:
             image, seconds = timed(bpy, name, args.size, "GPUGI", ours(preset, denoise), args.repeats)
@@ -181,8 +195,8 @@ def plot(rows: list[dict], path: str) -> None:
 
     scenes = sorted({r["scene"] for r in rows})
     fig, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4.2), squeeze=False)
-    styles = {"Cycles": "o-", "Cycles denoised": "s--", "GPU GI preset": "D-", "GPU GI preset denoised": "D--",
-              "GPU GI sweep": "x"}
+    styles = {"Cycles": "o-", "Cycles denoised": "s--", "Cycles adaptive": "o:", "Cycles adaptive denoised": "s:",
+              "GPU GI preset": "D-", "GPU GI preset denoised": "D--", "GPU GI sweep": "x"}
     for ax, name in zip(axes[0], scenes):
         for engine, style in styles.items():
             pts = sorted((r["seconds"], r["error"]) for r in rows if r["scene"] == name and r["engine"] == engine)
@@ -223,7 +237,7 @@ def main() -> None:
             if r["engine"].startswith("GPU GI preset"):
                 beaten = dominated_by(r, scene_rows)
                 front = f"   dominated by {beaten}" if beaten else "   Pareto front"
-            lines.append(f"  {r['engine']:22s} {r['config']:22s} {r['seconds']:8.2f} s   display rel. RMSE "
+            lines.append(f"  {r['engine']:24s} {r['config']:22s} {r['seconds']:8.2f} s   display rel. RMSE "
                          f"{r['error']:.4f}   HDR-FLIP {r['flip']:.4f}   linear {r['linear']:.4f}{front}")
         lines += ["  " + target(scene_rows, "error"), "  " + target(scene_rows, "flip")]
         print("\n".join(lines[-len(scene_rows) - 2:]), flush=True)

@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     except CliError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
-    from .status import format_stage_times, format_transfers, mode_line
+    from .status import format_samples, format_stage_times, format_transfers, mode_line
 
     for warning in warnings:
         print(f"warning: {warning}")
@@ -87,6 +87,8 @@ def main(argv=None) -> int:
     if "plan" in stats:
         print(f"plan: {', '.join(stats['plan'])}")
     print(f"stages: {format_stage_times(stats.get('ms', {}))}")
+    if "samples" in stats:
+        print(f"samples: {format_samples(stats)}")
     if "transfers" in stats:
         print(f"transfers: {format_transfers(stats['transfers'])}")
     print(f"image: {output}")

@@ -17,7 +17,7 @@ from gpu_core.errors import DeviceError, GpuGiError, RenderCancelled
 from .export import export_scene
 from .opencl_devices import free_unused_device_memory, survey
 from .passes import enabled_passes, wants_denoising_passes, wants_light_passes
-from .status import format_stage_times, mode_line
+from .status import format_samples, format_stage_times, mode_line
 
 # What the last final render in this process did: the command line and the
 # tests read it ("stats", "warnings", "passes", "error", "cancelled").
@@ -59,7 +59,8 @@ def render_final(engine, depsgraph) -> None:
             engine.report({"WARNING"}, f"GPU GI: {warning}")
     LAST_RUN.update(stats=result.stats, warnings=result.warnings, passes=written, scene=scene.name)
     engine.update_memory_stats(memory_used=result.stats.get("device_bytes", 0) / 2**20)
-    engine.update_stats("", f"GPU GI | {mode_line(result.stats)} | " + format_stage_times(result.stats["ms"]))
+    engine.update_stats("", f"GPU GI | {mode_line(result.stats)} | samples {format_samples(result.stats)} | "
+                        + format_stage_times(result.stats["ms"]))
 
 
 def _render(engine, depsgraph):

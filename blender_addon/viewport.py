@@ -134,9 +134,11 @@ def pass_settings(settings, step: Pass):
     be traced (an edit of the lit scene), an eighth of the photons (the
     full pass traces them all), so it stays quick. Every pass launches the
     image kernel in shorter batches than F12, so an edit waits less for
-    the launch it comes during."""
+    the launch it comes during. Every pixel takes every sample of a pass
+    (no noise threshold): the accumulation weighs a pass by its samples,
+    the same in every pixel."""
     settings = dataclasses.replace(settings, samples=step.samples, denoise=False, batch_seconds=BATCH_SECONDS,
-                                   denoising_passes=bool(settings.denoise) and not step.coarse)
+                                   denoising_passes=bool(settings.denoise) and not step.coarse, noise_threshold=0.0)
     if step.coarse:
         seeds = max(COARSE_MIN_CACHE_POINTS, settings.cache_seeds // COARSE_FACTOR**2)
         settings = dataclasses.replace(settings, cache_seeds=min(settings.cache_seeds, seeds),

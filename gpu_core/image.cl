@@ -463,17 +463,28 @@ inline void Image_path(const SceneView *sc, const Camera *cam, const ImageJob *j
     }
 }
 
-/* Add a path's light to its pixel's sums. The clamp scales every pass of
- * the path alike, so they still add up to Combined; a non-finite path is
- * dropped. */
-inline void Image_accumulate(const ImagePath *path, float clamp_value, float3 *pixel_light) {
+/* Add a path's light to its pixel's sums; returns what it added to
+ * Combined. The clamp scales every pass of the path alike, so they still
+ * add up to Combined; a non-finite path is dropped. */
+inline float3 Image_accumulate(const ImagePath *path, float clamp_value, float3 *pixel_light) {
     float3 radiance = (float3)(0.0f);
     for (int p = 0; p < IMAGE_SUMMED; ++p) radiance += path->light[p];
-    if (!(isfinite(radiance.x) && isfinite(radiance.y) && isfinite(radiance.z))) return;
+    if (!(isfinite(radiance.x) && isfinite(radiance.y) && isfinite(radiance.z))) return (float3)(0.0f);
     float3 scale = (float3)(1.0f);
     if (clamp_value > 0.0f) scale = fmin(radiance, (float3)(clamp_value)) / fmax(radiance, (float3)(1e-30f));
     for (int p = 0; p < IMAGE_SLOTS; ++p) pixel_light[p] += path->light[p] * scale;
+    return radiance * scale;
 }
+
+/* The mean of `count` new samples (their sum) merged into the mean of
+ * `done` earlier ones (old, not read when there are none). */
+inline float4 Image_merge(float4 old, float4 sum, int done, int count) {
+    float inv = 1.0f / (float)(done + count);
+    return done > 0 ? old * ((float)done * inv) + sum * inv : sum * inv;
+}
+
+/* Even numbers in [0, n): the even-numbered samples among a pixel's first n. */
+inline int Image_evens(int n) { return (n + 1) / 2; }
 
 /* The pixel filter's offset from the pixel centre along one axis, for u in
  * [0, 1): its inverse CDF, tabulated on the host (shading/pixel_filter.py). */
@@ -499,16 +510,33 @@ inline int2 Image_pixel_of(int g, int w, int h) {
 
 /* One work item per pixel of the launch (job.window: width, height, pixels
  * in this launch, first pixel of the launch; job.origin: the window's
- * lower-left pixel), all its samples. Light passes are stored pass after
- * pass, each the size of the window. */
+ * lower-left pixel), job.samples samples each. Light passes are stored
+ * pass after pass, each the size of the window. With adaptive sampling
+ * (OUTPUT_ADAPTIVE) a launch is one round: only pixels flagged in
+ * `active` take samples, up to job.sample_limit in all, and their means
+ * are merged with those of the rounds before; `adaptive` holds per pixel
+ * the mean of its even-numbered samples' Combined (xyz) and its sample
+ * count (w), from which Image_adaptive_active judges its noise. */
 __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global float *pixel_filter, IMAGE_GI_PARAMS,
                            __global float4 *out_combined,
                            __global float *out_depth, __global float4 *out_normal, __global float4 *out_light,
-                           __global float4 *out_albedo, __global float4 *out_feature_normal) {
+                           __global float4 *out_albedo, __global float4 *out_feature_normal,
+                           __global float4 *adaptive, const __global int *active) {
     int i = Launch_global_id();
     int g = job.window.w + i; /* index in the render window, in pixel order */
     int window_pixels = job.window.x * job.window.y;
     if (i >= job.window.z || g >= window_pixels) return;
+    int2 wp = Image_pixel_of(g, job.window.x, job.window.y);
+    int wx = wp.x, wy = wp.y;
+    int o = wy * job.window.x + wx; /* where the pixel's outputs go (rows) */
+    /* samples the pixel has from earlier rounds, and those it takes now */
+    int done = 0, count = job.samples;
+    if (job.outputs & OUTPUT_ADAPTIVE) {
+        if (!active[o]) return;
+        done = (int)adaptive[o].w;
+        count = min(count, job.sample_limit - done);
+        if (count <= 0) return;
+    }
     SceneView sc = SCENE_MAKE();
     Camera cam = *sc.camera;
 #ifdef IMAGE_GLOSSY_CUT
@@ -516,15 +544,12 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
 #else
     ImageGi gi = {gi_pos, gi_nrm, gi_indirect, gi_caustic};
 #endif
-    int2 wp = Image_pixel_of(g, job.window.x, job.window.y);
-    int wx = wp.x, wy = wp.y;
-    int o = wy * job.window.x + wx; /* where the pixel's outputs go (rows) */
     int px = job.origin.x + wx, py = job.origin.y + wy;
 
     float3 pixel_light[IMAGE_SLOTS];
     for (int p = 0; p < IMAGE_SLOTS; ++p) pixel_light[p] = (float3)(0.0f);
     float alpha_sum = 0.0f;
-    float3 albedo_sum = (float3)(0.0f), feature_normal_sum = (float3)(0.0f);
+    float3 albedo_sum = (float3)(0.0f), feature_normal_sum = (float3)(0.0f), even_sum = (float3)(0.0f);
     float depth = 1e10f;
     float3 normal = (float3)(0.0f);
     /* anti-aliasing: the pixel's samples follow the R2 sequence from a
@@ -534,7 +559,7 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
     uint aa_x = Rng_hash(pixel_id ^ Rng_hash(job.seed ^ 0xa511e9b3U));
     uint aa_y = Rng_hash(aa_x);
     uint strata_seed = Rng_hash(aa_y ^ 0x68e31da4U);
-    for (int s = 0; s < job.samples; ++s) {
+    for (int s = done; s < done + count; ++s) {
         uint number = (uint)(job.sample_start + s); /* the path's number among all the pixel's passes */
         Rng rng = Rng_make(pixel_id, number, job.seed);
         float2 aa = Rng_r2(number, aa_x, aa_y);
@@ -543,7 +568,8 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
         float sy = (float)py + 0.5f + Image_filter_offset(pixel_filter, aa.y);
         ImageStrata strata = {number, strata_seed, true};
         Image_path(&sc, &cam, &job, &gi, wx, wy, sx, sy, strata, &rng, &path);
-        Image_accumulate(&path, job.clamp, pixel_light);
+        float3 added = Image_accumulate(&path, job.clamp, pixel_light);
+        if ((s & 1) == 0) even_sum += added;
         alpha_sum += path.alpha;
         albedo_sum += path.albedo;
         feature_normal_sum += path.feature_normal;
@@ -552,17 +578,64 @@ __kernel void Image_pixels(SCENE_PARAMS, const ImageJob job, const __global floa
             normal = path.normal;
         }
     }
-    float inv = 1.0f / (float)job.samples;
     float3 total = (float3)(0.0f);
     for (int p = 0; p < IMAGE_SUMMED; ++p) total += pixel_light[p];
-    out_combined[o] = (float4)(total * inv, alpha_sum * inv);
-    out_depth[o] = depth;
-    out_normal[o] = (float4)(normal, 0.0f);
+    out_combined[o] = Image_merge(done > 0 ? out_combined[o] : (float4)(0.0f), (float4)(total, alpha_sum), done, count);
+    if (done == 0) {
+        out_depth[o] = depth;
+        out_normal[o] = (float4)(normal, 0.0f);
+    }
 #ifdef IMAGE_LIGHT_PASSES
-    for (int p = 0; p < PASS_COUNT; ++p) out_light[p * window_pixels + o] = (float4)(pixel_light[p] * inv, 0.0f);
+    for (int p = 0; p < PASS_COUNT; ++p) {
+        int at = p * window_pixels + o;
+        out_light[at] = Image_merge(done > 0 ? out_light[at] : (float4)(0.0f), (float4)(pixel_light[p], 0.0f), done,
+                                    count);
+    }
 #endif
     if (job.outputs & OUTPUT_DENOISING) {
-        out_albedo[o] = (float4)(albedo_sum * inv, 0.0f);
-        out_feature_normal[o] = (float4)(feature_normal_sum * inv, 0.0f);
+        out_albedo[o] = Image_merge(done > 0 ? out_albedo[o] : (float4)(0.0f), (float4)(albedo_sum, 0.0f), done, count);
+        out_feature_normal[o] = Image_merge(done > 0 ? out_feature_normal[o] : (float4)(0.0f),
+                                            (float4)(feature_normal_sum, 0.0f), done, count);
     }
+    if (job.outputs & OUTPUT_ADAPTIVE) {
+        int evens_before = Image_evens(done), evens = Image_evens(done + count) - evens_before;
+        float4 even = evens > 0 ? Image_merge(adaptive[o], (float4)(even_sum, 0.0f), evens_before, evens) : adaptive[o];
+        adaptive[o] = (float4)(even.xyz, (float)(done + count));
+    }
+}
+
+/* A pixel's noise as Cycles' adaptive sampling judges it [Dammertz et al.
+ * 2010, section 2.1]: the difference between the mean of all its samples
+ * and that of its even-numbered ones, relative to the square root of its
+ * brightness (to the brightness itself above 1, where it is overexposed). */
+inline float Image_noise(float4 combined, float4 even) {
+    float3 d = fabs(combined.xyz - even.xyz);
+    float intensity = combined.x + combined.y + combined.z;
+    float normalise = intensity < 1.0f ? sqrt(fmax(intensity, 0.0f)) : intensity;
+    return (d.x + d.y + d.z) / (0.0001f + normalise);
+}
+
+/* The pixels of the window that take the next round: those below
+ * job.sample_limit samples whose own noise, or a neighbour's (3 x 3), is
+ * at least `threshold`, so that noisy regions keep their rims sampled;
+ * counter[0] counts them. One work item per pixel of the window, in rows. */
+__kernel void Image_adaptive_active(const ImageJob job, const __global float4 *combined,
+                                    const __global float4 *adaptive, const float threshold, __global int *active,
+                                    volatile __global int *counter) {
+    int o = Launch_global_id();
+    int w = job.window.x, h = job.window.y;
+    if (o >= w * h) return;
+    int x = o % w, y = o / w;
+    bool noisy = false;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            int nx = x + dx, ny = y + dy;
+            if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+            int n = ny * w + nx;
+            noisy = noisy || !(Image_noise(combined[n], adaptive[n]) < threshold);
+        }
+    }
+    bool take = noisy && (int)adaptive[o].w < job.sample_limit;
+    active[o] = take ? 1 : 0;
+    if (take) atomic_inc(counter);
 }

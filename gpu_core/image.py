@@ -2,6 +2,12 @@
 launches of a bounded number of pixels so that progress is reported and a
 request to stop is seen between them, then the passes read back.
 
+With a noise threshold (adaptive sampling) the samples come in rounds:
+every pixel takes the minimum first, then, round after round, only the
+pixels whose noise (or a neighbour's) is still above the threshold take
+more, up to the samples setting; the kernel merges each round's means
+with those before.
+
 In GI mode the kernel reads the GI cache through the shading-point grid
 (gi/pipeline.py) that the stages before it left on the device.
 """
@@ -13,7 +19,7 @@ import time
 import numpy as np
 
 from .device import Device
-from .device.constants import OUTPUT_DENOISING, PASS_COUNT
+from .device.constants import OUTPUT_ADAPTIVE, OUTPUT_DENOISING, PASS_COUNT
 from .device.layout import IMAGE_JOB_DTYPE
 from .errors import check_stop
 from .scene.model import Scene
@@ -34,6 +40,10 @@ LIGHT_PASSES = (
 )
 DENOISING_PASSES = ("Denoising Albedo", "Denoising Normal", "Denoising Depth")
 assert len(LIGHT_PASSES) == PASS_COUNT
+# Cycles compares a pixel's noise with five times the threshold its users
+# set; so does this, so that a threshold means here what it means there
+NOISE_SCALE = 5.0
+MAX_ROUNDS = 16  # later rounds of adaptive sampling take at least samples / this many samples each
 
 
 def programs(defines: dict) -> list[tuple[str, dict]]:
@@ -49,7 +59,22 @@ def film_bytes(window: tuple[int, int, int, int], settings: RenderSettings) -> i
         per_pixel += 16 * len(LIGHT_PASSES)
     if settings.denoising_passes:
         per_pixel += 32
+    if adaptive_rounds(settings) is not None:
+        per_pixel += 20  # each pixel's even-sample mean and count, and its flag
     return (x1 - x0) * (y1 - y0) * per_pixel
+
+
+def adaptive_rounds(settings: RenderSettings) -> tuple[int, int] | None:
+    """Adaptive sampling's samples in the first round (every pixel) and in
+    each later one (the pixels still noisy), or None where every pixel
+    takes every sample: no threshold, or a minimum of all the samples.
+    Min Samples 0 takes a quarter of the samples, at least 4."""
+    if not settings.noise_threshold > 0.0:
+        return None
+    first = settings.min_samples or max(4, settings.samples // 4)
+    if first >= settings.samples:
+        return None
+    return first, max(first, -(-settings.samples // MAX_ROUNDS))
 
 
 def _ladder(pixels: int, limit: int) -> int:
@@ -60,49 +85,105 @@ def _ladder(pixels: int, limit: int) -> int:
 
 def render_image(device: Device, buffers: SceneBuffers, scene: Scene, settings: RenderSettings, defines: dict,
                  gi_field=None, progress=None, should_stop=None, sample_start: int = 0
-                 ) -> tuple[dict[str, np.ndarray], int]:
-    """The passes of the render window (rows from the bottom) and the number
-    of launches. ``gi_field``: the GI cache grid (GI mode), else None;
-    ``sample_start``: the number of each pixel's first camera path."""
+                 ) -> tuple[dict[str, np.ndarray], dict]:
+    """The passes of the render window (rows from the bottom), and what the
+    stage did: its launches (``batches``) and, with adaptive sampling, its
+    rounds and mean samples per pixel (``adaptive``). ``gi_field``: the GI
+    cache grid (GI mode), else None; ``sample_start``: the number of each
+    pixel's first camera path."""
     x0, y0, x1, y1 = scene.camera.pixel_window
     w, h = x1 - x0, y1 - y0
     total = w * h
-    outputs = OUTPUT_DENOISING if settings.denoising_passes else 0
+    rounds = adaptive_rounds(settings)
+    outputs = (OUTPUT_DENOISING if settings.denoising_passes else 0) | (OUTPUT_ADAPTIVE if rounds else 0)
     combined, depth, normal = device.empty(total * 16), device.empty(total * 4), device.empty(total * 16)
     # passes nobody asked for get a stand-in the kernel never writes
     light = device.empty(total * 16 * len(LIGHT_PASSES) if settings.light_passes else 16)
     albedo, feature_normal = (device.empty(total * 16 if settings.denoising_passes else 16) for _ in range(2))
+    # adaptive sampling: per pixel its even samples' mean and its count, and whether it takes the next round
+    film, active = (device.zeros(total * 16), device.empty(total * 4)) if rounds else (device.empty(16),) * 2
+    if rounds:
+        device.fill(active, 1, total * 4)
     gi = gi_field.kernel_args() if gi_field is not None else [device.empty(16)] * 4
     job = np.zeros(1, IMAGE_JOB_DTYPE)
-    job["origin"] = (x0, y0)
+    job["origin"], job["window"] = (x0, y0), (w, h, 0, 0)
     # GI mode: indirect diffuse light comes from the cache, so no diffuse bounce is traced
     diffuse = settings.diffuse_bounces if gi_field is None else 0
-    job["samples"], job["max_bounces"], job["max_diffuse"] = settings.samples, settings.max_bounces, diffuse
+    job["max_bounces"], job["max_diffuse"] = settings.max_bounces, diffuse
     job["light_samples"], job["seed"], job["clamp"] = settings.light_samples, settings.seed, settings.clamp
     job["outputs"], job["gi_subpixels"] = outputs, gi_field.subpixels if gi_field is not None else 1
-    job["sample_start"] = sample_start
+    job["sample_start"], job["sample_limit"] = sample_start, settings.samples
     kernel = device.kernel(PROGRAM, "Image_pixels", defines)
     scene_args = buffers.kernel_args(settings.transparent_background)
     pixel_filter = device.to_device(filter_table(scene.camera.filter_kind, scene.camera.filter_width))
+    args = [*scene_args, job, pixel_filter, *gi, combined, depth, normal, light, albedo, feature_normal, film, active]
     # the first launch is sized by its path count; later ones by the measured speed
-    paths_per_pixel = settings.samples * settings.light_samples
-    batch = _ladder(max(_FIRST_BATCH_PATHS // paths_per_pixel, 1), settings.batch_pixels)
-    start, batches = 0, 0
-    while start < total:
-        count = min(batch, total - start)
-        job["window"] = (w, h, count, start)
+    batch = _ladder(max(_FIRST_BATCH_PATHS // (settings.samples * settings.light_samples), 1), settings.batch_pixels)
+    taken, count, launches = 0, (rounds or (settings.samples,))[0], 0
+    for number in range(_round_limit(settings, rounds)):
+        job["samples"] = count
+
+        def report(start: int) -> None:
+            if progress is not None:
+                share = min(taken + count * start / total, settings.samples) / settings.samples
+                progress(share, f"rendered {start}/{total} pixels" + (f", round {number + 1}" if rounds else ""))
+
+        batch, launched = _launch_round(device, kernel, args, job, (w, h), batch, settings, report, should_stop)
+        launches += launched
+        taken += count
+        if not rounds or not _next_round(device, defines, job, combined, film, active, settings, total):
+            break
+        check_stop(should_stop)
+        count = rounds[1]
+    info = {"batches": launches}
+    if rounds:
+        samples = device.read(film, (total, 4), np.float32)[:, 3]
+        info["adaptive"] = {"noise_threshold": settings.noise_threshold, "min_samples": rounds[0],
+                            "round_samples": rounds[1], "rounds": number + 1, "mean_samples": float(samples.mean()),
+                            "stopped_early": float((samples < settings.samples).mean())}
+    return _read_passes(device, settings, w, h, combined, depth, normal, light, albedo, feature_normal), info
+
+
+def _launch_round(device: Device, kernel, args: list, job, size: tuple[int, int], batch: int,
+                  settings: RenderSettings, report, should_stop) -> tuple[int, int]:
+    """The image kernel over every pixel of the window of ``size`` (``args``:
+    its arguments, ``job`` among them), in launches of sizes from the ladder,
+    each sized by the speed of the one before; ``report(pixels done)``
+    after each, a stop request seen between them. The next launch's size
+    and the number of launches."""
+    (w, h), start, launches = size, 0, 0
+    while start < w * h:
+        pixels = min(batch, w * h - start)
+        job["window"] = (w, h, pixels, start)
         began = time.perf_counter()
-        kernel(count, *scene_args, job, pixel_filter, *gi, combined, depth, normal, light, albedo, feature_normal)
+        kernel(pixels, *args)
         device.queue.finish()
         elapsed = time.perf_counter() - began
-        start += count
-        batches += 1
-        if progress is not None:
-            progress(start / total, f"rendered {start}/{total} pixels")
-        if start < total:
+        start += pixels
+        launches += 1
+        report(start)
+        if start < w * h:
             check_stop(should_stop)
-        batch = _ladder(int(count * min(settings.batch_seconds / max(elapsed, 1e-4), 4.0)), settings.batch_pixels)
-    return _read_passes(device, settings, w, h, combined, depth, normal, light, albedo, feature_normal), batches
+        batch = _ladder(int(pixels * min(settings.batch_seconds / max(elapsed, 1e-4), 4.0)), settings.batch_pixels)
+    return batch, launches
+
+
+def _round_limit(settings: RenderSettings, rounds: tuple[int, int] | None) -> int:
+    """Most rounds of one render: enough for a pixel that sat some rounds
+    out (its neighbours quiet) to reach all the samples when they are not."""
+    if rounds is None:
+        return 1
+    first, later = rounds
+    return 1 + 2 * -(-(settings.samples - first) // later)
+
+
+def _next_round(device: Device, defines: dict, job, combined, film, active, settings: RenderSettings,
+                total: int) -> bool:
+    """Flag the pixels of the next round (Image_adaptive_active); whether there are any."""
+    counter = device.zeros(4)
+    device.kernel(PROGRAM, "Image_adaptive_active", defines)(
+        total, job, combined, film, np.float32(NOISE_SCALE * settings.noise_threshold), active, counter)
+    return int(device.read(counter, 1, np.int32)[0]) > 0
 
 
 def _read_passes(device: Device, settings: RenderSettings, w: int, h: int, combined, depth, normal, light, albedo,

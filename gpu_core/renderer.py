@@ -127,8 +127,8 @@ class Renderer:
             field_ = self._gi_cache(scene, settings, the_plan, maps, timer, should_stop, say)
             check_stop(should_stop)
         with timer.stage("render"):
-            passes, batches = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
-                                           field_, progress, should_stop, sample_start)
+            passes, image = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
+                                         field_, progress, should_stop, sample_start)
         warnings, denoised = self._warnings(scene), False
         if settings.denoise:
             if progress is not None:
@@ -137,7 +137,7 @@ class Renderer:
                 problem = _denoise(passes, settings.denoise_quality, keep_guides)
             denoised = not problem
             warnings += [problem] if problem else []
-        stats = self._stats(scene, settings, the_plan, timer, batches, field_, moved)
+        stats = self._stats(scene, settings, the_plan, timer, image, field_, moved)
         stats["denoised"] = denoised
         return RenderResult(passes=passes, stats=stats, warnings=warnings)
 
@@ -206,7 +206,7 @@ class Renderer:
 
     # -- report --------------------------------------------------------------------
 
-    def _stats(self, scene: Scene, settings: RenderSettings, the_plan: Plan, timer: StageTimer, batches: int,
+    def _stats(self, scene: Scene, settings: RenderSettings, the_plan: Plan, timer: StageTimer, image: dict,
                field_, moved) -> dict:
         transfers = self.device.transfers().since(moved)
         stats = {
@@ -218,7 +218,7 @@ class Renderer:
             "lights": len(scene.lights),
             "emissive_triangles": self._buffers.emit_count,
             "textures": len(scene.textures),
-            "batches": batches,
+            "batches": image["batches"],
             "samples": settings.samples,
             "light_samples": settings.light_samples,
             "device_bytes": the_plan.device_bytes,
@@ -226,6 +226,8 @@ class Renderer:
             "kdtree": self._buffers.tree.stats,
             **scene.report.as_stats(),
         }
+        if "adaptive" in image:
+            stats["adaptive"] = image["adaptive"]
         if field_ is not None:
             stats["gi"] = {**field_.stats, "photons_reused": not the_plan.traces_photons,
                            "photons_reweighted": the_plan.reweights_photons,

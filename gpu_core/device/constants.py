@@ -62,6 +62,7 @@ PASS_COUNT = 9
 # what the image kernel writes besides Combined, Depth and Normal (flags; the
 # light passes are the plan's IMAGE_LIGHT_PASSES define)
 OUTPUT_DENOISING = 1
+OUTPUT_ADAPTIVE = 2  # adaptive sampling: only active pixels sampled, sums merged with earlier rounds
 
 # photon tracing (photons/photon_trace.cl, photons/photon_emit.h)
 PHOTON_PASS_GLOBAL = 0  # every diffuse hit but those of caustic paths

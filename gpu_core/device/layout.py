@@ -200,7 +200,7 @@ IMAGE_JOB = Struct("ImageJob", "what one launch of the image kernel renders", [
     ("outputs", "int", "OUTPUT_* flags"),
     ("gi_subpixels", "int", "GI mode: shading points per pixel side of the cache grid"),
     ("sample_start", "int", "number of the first camera path of each pixel (progressive refinement)"),
-    ("pad", "int", ""),
+    ("sample_limit", "int", "adaptive sampling: samples a pixel takes at most over all rounds"),
 ])
 
 STRUCTS = (KD_NODE, MATERIAL, LIGHT, CAMERA, TEXTURE_INFO, POINT_NODE, BUILD_NODE, CHUNK, BUILD_SUMS,

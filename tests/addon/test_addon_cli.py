@@ -47,6 +47,7 @@ def test_cli_writes_a_png_and_prints_its_path_and_stage_times(small_blend, tmp_p
     assert "export" in stages and "render" in stages and "ms" in stages
     plan = next(line for line in run.stdout.splitlines() if line.startswith("plan:"))
     assert plan.endswith(", denoise") and "denoise" in stages  # on by default, as in Cycles
+    assert "samples: 2 per pixel" in run.stdout.splitlines()
     image = bpy_module.data.images.load(str(out))
     try:
         assert tuple(image.size) == (40, 30)

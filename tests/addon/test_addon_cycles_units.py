@@ -118,6 +118,7 @@ def _plane_scene(bpy, case):
     cycles.device, cycles.samples, cycles.max_bounces = "CPU", cycles_samples, 0
     cycles.use_adaptive_sampling = cycles.use_denoising = False
     scene.gpugi.samples = gpugi_samples
+    scene.gpugi.noise_threshold = 0.0  # every pixel takes every sample, like Cycles here
     scene.gpugi.mode = "REFERENCE"  # direct light only, like Cycles with max bounces 0
     scene.gpugi.diffuse_bounces = 0
     scene.gpugi.denoise = False  # like Cycles here: light transport as rendered, pixel by pixel

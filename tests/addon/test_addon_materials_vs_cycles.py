@@ -199,6 +199,7 @@ def _scene(bpy, material, lighting):
     cycles.pixel_filter_type, cycles.filter_width = "BOX", 1.0
     gpugi = scene.gpugi
     gpugi.mode, gpugi.samples, gpugi.denoise = "REFERENCE", GPUGI_SAMPLES, False
+    gpugi.noise_threshold = 0.0  # every pixel takes every sample, as Cycles does here
     gpugi.diffuse_bounces, gpugi.max_bounces = 1, 8
     gpugi.clamp = 0.0
     return scene

@@ -169,7 +169,7 @@ def test_own_panels_draw_existing_settings(bpy_empty):
     assert {"mode", "preset", "samples", "preview_samples", "max_bounces", "diffuse_bounces", "clamp", "seed",
             "device", "film_transparent", "global_photons", "caustic_photons", "photon_k", "cache_seeds",
             "gather_rays", "gi_subpixels", "cut_delta", "cache_alpha", "denoise", "preview_denoise",
-            "denoise_quality"} <= set(drawn)
+            "denoise_quality", "noise_threshold", "min_samples"} <= set(drawn)
     # the Passes panel: every toggle of a pass this engine writes
     assert {"use_pass_z", "use_pass_normal", "use_pass_diffuse_direct", "use_pass_glossy_indirect",
             "use_pass_transmission_direct", "use_pass_emit", "use_pass_environment", "use_pass_caustics",

@@ -247,6 +247,13 @@ def test_every_viewport_pass_launches_the_image_in_shorter_batches_than_f12():
     assert BATCH_SECONDS < RenderSettings().batch_seconds
 
 
+def test_viewport_passes_take_every_sample_whatever_the_noise_threshold():
+    # the accumulation weighs each pass by its samples, the same in every pixel
+    job = _job(samples=64)
+    job = dataclasses.replace(job, settings=dataclasses.replace(job.settings, noise_threshold=0.01))
+    assert all(pass_settings(job.settings, step).noise_threshold == 0.0 for step in passes(job))
+
+
 @pytest.mark.parametrize("denoise", [False, True])
 def test_only_the_accumulated_full_image_is_denoised_and_only_when_asked(denoise):
     renderer = FakeRenderer()

@@ -29,6 +29,9 @@ def test_presets_form_a_ladder():
             assert PRESETS[lower][knob] <= PRESETS[higher][knob], (lower, higher, knob)
         assert PRESETS[lower]["cut_delta"] >= PRESETS[higher]["cut_delta"]  # a finer cut costs more
     assert PRESETS["reference"]["diffuse_bounces"] >= 16  # the ground truth follows light far
+    # adaptive sampling: Final stops pixels at a lower noise than Preview; the ground truth takes every sample
+    assert 0.0 < PRESETS["final"]["noise_threshold"] <= PRESETS["preview"]["noise_threshold"]
+    assert PRESETS["reference"]["noise_threshold"] == 0.0
 
 
 def test_preset_values_and_overrides():
