@@ -26,18 +26,24 @@ __kernel void Cut_parents(const __global KdNode *nodes, const int n, __global in
     parent[nodes[i].child] = i;
 }
 
-/* The coarse cut: a node is in it when it is marked (approximate
- * irradiance at least E_min, and not mixed) or a leaf, and no ancestor is
- * marked. Empty nodes have their exact irradiance known: none. */
+/* Whether node i is marked for the coarse cut: approximate irradiance at
+ * least E_min, not mixed, and at most max_photons photons. */
+inline bool Cut_marked(const __global KdNode *nodes, const __global PointNode *info, int i, float e_min,
+                       int max_photons) {
+    return Cut_approx(info, i) >= e_min && !Cut_mixed(nodes, info, i) && info[i].count <= max_photons;
+}
+
+/* The coarse cut: a node is in it when it is marked or a leaf, and no
+ * ancestor is marked. Empty nodes have their exact irradiance known: none. */
 __kernel void Cut_coarse(const __global KdNode *nodes, const __global PointNode *info,
-                         const __global int *parent, const int n, const float e_min, __global int *in_cut,
-                         __global float4 *exact) {
+                         const __global int *parent, const int n, const float e_min, const int max_photons,
+                         __global int *in_cut, __global float4 *exact) {
     int i = Launch_global_id();
     if (i >= n) return;
-    bool marked = Cut_approx(info, i) >= e_min && !Cut_mixed(nodes, info, i);
+    bool marked = Cut_marked(nodes, info, i, e_min, max_photons);
     bool covered = false;
     for (int a = parent[i]; a >= 0 && !covered; a = parent[a])
-        covered = Cut_approx(info, a) >= e_min && !Cut_mixed(nodes, info, a);
+        covered = Cut_marked(nodes, info, a, e_min, max_photons);
     in_cut[i] = (marked || nodes[i].axis == KD_LEAF) && !covered;
     exact[i] = info[i].count == 0 ? (float4)(0.0f, 0.0f, 0.0f, 1.0f) : (float4)(0.0f);
 }

@@ -10,8 +10,8 @@ build). ``select``:
 
 1. E_min is the mean E~_p (luminance, zeros left out) over tree levels
    12-13, or the two deepest levels of a shallower tree;
-2. the coarse cut is, on each path, the first node with E~_p >= E_min, and
-   the leaf where there is none;
+2. the coarse cut is, on each path, the first node with E~_p >= E_min and
+   at most MAX_PHOTONS photons, and the leaf where there is none;
 3. refinement: each cut node's exact irradiance E_p at its centre comes
    from k-nearest-photon density estimation; where |E~_p - E_p| > delta E_p
    the node is replaced by its children, for a few rounds.
@@ -40,6 +40,10 @@ DELTA = 0.2  # default refinement threshold, relative to E_p
 MAX_ROUNDS = 6  # default refinement rounds
 LEVELS = (12, 13)  # tree levels whose mean E~_p is E_min
 NEIGHBOURS = 6  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS; README)
+# photons of a node that can join the coarse cut, at most (MNRT's ICUT_PHOTONLIMIT): on one flat
+# surface no node is mixed, and a node near the root, standing for the whole surface, flattened
+# its light (README, "Illumination cut")
+MAX_PHOTONS = 5000
 COHERENT = 0.9  # |mean photon normal| below this: the node spans several surfaces (cut.cl CUT_COHERENT)
 # Caustic estimates gather within this many times the caustic map's typical
 # k-photon radius (its VVH radius), Jensen's maximum radius: further out the
@@ -156,7 +160,7 @@ def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_ro
     device.fill(parent, -1, 4 * n)
     kern("Cut_parents")(n, nodes, np.int32(n), parent)
     in_cut, exact = device.empty(4 * n), device.empty(16 * n)
-    kern("Cut_coarse")(n, nodes, info, parent, np.int32(n), np.float32(e_min), in_cut, exact)
+    kern("Cut_coarse")(n, nodes, info, parent, np.int32(n), np.float32(e_min), np.int32(MAX_PHOTONS), in_cut, exact)
     coarse = _tally(kern, nodes, info, in_cut, n)[0]
     # refinement by exact estimates at the node centres
     refined, rounds, counter, next_cut = 0, 0, device.empty(4), device.empty(4 * n)

@@ -62,6 +62,43 @@ def test_evenly_lit_plane_is_cut_far_above_the_leaves(device):
     assert 0 < len(chosen.nodes) < leaves / 20
 
 
+def point_lit_plane_photons(rng, n, height=1.0, half=4.0):
+    """Photons of a point light ``height`` above the square [-half, half]^2 of
+    the plane z = 0, emitted downwards uniformly over directions, those that
+    land carrying 1 W between them; and the light's intensity (W/sr)."""
+    kept = []
+    while sum(len(p) for p in kept) < n:
+        d = rng.standard_normal((n, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = d[d[:, 2] < -1e-3]
+        p = d * (height / -d[:, 2])[:, None]
+        kept.append(p[(np.abs(p[:, 0]) < half) & (np.abs(p[:, 1]) < half)])
+    pts = np.concatenate(kept)[:n].astype(np.float32)
+    pts[:, 2] = 0.0
+    normal = np.tile(UP, (n, 1))
+    # the square's solid angle seen from the light holds the 1 W
+    solid_angle = 4.0 * np.arcsin(half * half / (half * half + height * height))
+    return pts, np.full((n, 3), 1.0 / n, np.float32), normal, 1.0 / solid_angle
+
+
+@pytest.mark.parametrize("n", [60_000, 150_000])
+def test_a_plane_lit_from_one_point_keeps_its_falloff_in_the_cut(device, n):
+    # one flat surface: no node is mixed, so without a bound on a coarse
+    # node's photons a node near the root (the root itself in a demo scene)
+    # could stand for the whole plane and flatten the light's falloff
+    rng = np.random.default_rng(2)
+    pts, power, normal, intensity = point_lit_plane_photons(rng, n)
+    tree = build(device, pts, power, normal)
+    chosen = cut.select(device, tree, 50)
+    assert cut_is_valid(tree, chosen.nodes)
+    inner = tree.nodes()["axis"][chosen.nodes] != cut.LEAF
+    assert tree.node_info()["count"][chosen.nodes][inner].max(initial=0) <= cut.MAX_PHOTONS
+    q = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]], np.float32)
+    e = chosen.irradiance_at(q, np.tile(UP, (2, 1)))[:, 0]
+    expected = intensity / (1.0 + (q[:, :2] ** 2).sum(1)) ** 1.5  # I cos(theta) / d^2 at height 1
+    np.testing.assert_allclose(e, expected, rtol=0.15)
+
+
 def test_irradiance_from_the_cut_matches_a_lit_plane(device):
     rng = np.random.default_rng(1)
     tree = build(device, *plane_photons(rng, 50000, 3.0))
