@@ -131,7 +131,7 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
                      GiField(empty, empty, empty, empty, settings.gi_subpixels))
     if chosen is not None and chosen.count:
         m, dark = chosen.count, device.zeros(16 * chosen.count)
-        checked = neighbours.check(device, chosen.pos, dark, device.to_device(np.ones(m, np.float32)), m)
+        checked = neighbours.check(device, chosen.pos, chosen.nrm, dark, device.to_device(np.ones(m, np.float32)), m)
         interpolation.interpolate_on_device(device, chosen.pos, chosen.nrm, dark, checked.radii, m, points.pos,
                                             points.nrm, points.count)
     if points.count and "caustics" in the_plan.stages:

@@ -161,7 +161,7 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
                                      settings.max_bounces, scene_defines, should_stop)
         check_stop(should_stop)
         with timer.stage("interpolate"):
-            checked = neighbours.check(device, chosen.pos, gathered.e, gathered.distance, chosen.count)
+            checked = neighbours.check(device, chosen.pos, chosen.nrm, gathered.e, gathered.distance, chosen.count)
         new = CacheRecords(chosen.pos, chosen.nrm, checked.irradiance, checked.radii, gathered.gradient, chosen.count)
         stats.update(sample_points=chosen.count, sample_points_reused=samples_reused,
                      selection={key: chosen.stats.get(key) for key in _SELECTION_STATS},

@@ -182,33 +182,56 @@ def test_scaled_and_moved_scenes_give_the_unit_scene_image(device, size, offset)
     assert np.sqrt(((image - unit) ** 2).mean()) / unit.mean() < 0.1
 
 
-def test_a_lone_bright_cache_sample_is_brought_down_to_its_neighbours(device):
+def test_a_lone_bright_cache_sample_is_brought_down_and_light_no_neighbour_saw_is_shared(device):
     rng = np.random.default_rng(3)
-    positions = np.zeros((400, 3), np.float32)
-    positions[:, :2] = rng.uniform(-1, 1, (400, 2))
+    m = 400
+    positions = np.zeros((m, 3), np.float32)
+    positions[:, :2] = rng.uniform(-1, 1, (m, 2))
     positions[7, :2] = (-0.8, -0.8)
-    irradiance = np.ones((400, 3), np.float32)
+    positions[11, :2] = (-0.6, 0.6)
+    normals = np.tile(np.float32([0.0, 0.0, 1.0]), (m, 1))
+    d = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2)
+    nearest = np.argsort(d, axis=1)[:, 1:neighbours.NEIGHBOURS + 1]
+    sideways = nearest[11][0]
+    normals[sideways] = (1.0, 0.0, 0.0)  # a neighbour on a wall facing elsewhere: no share
+    irradiance = np.ones((m, 3), np.float32)
     irradiance[7] = 100.0  # one sample saw a focused caustic
     bright = np.linalg.norm(positions[:, :2] - [0.5, 0.5], axis=1) < 0.35
     irradiance[bright] = 50.0  # a lit patch many samples see
-    checked = neighbours.check(device, device.to_device(float4_rows(positions)),
-                               device.to_device(float4_rows(irradiance)),
-                               device.to_device(np.ones(len(positions), np.float32)), len(positions))
-    clamped = device.read(checked.irradiance, (len(positions), 4), np.float32)[:, :3]
-    np.testing.assert_allclose(clamped[7], neighbours.OUTLIER_RATIO, rtol=1e-5)
-    # the patch stays lit where its samples' neighbours are in it too
-    d = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2)
-    nearest = np.argsort(d, axis=1)[:, 1:neighbours.NEIGHBOURS + 1]
+    dark = np.linalg.norm(positions[:, :2] - [-0.6, 0.6], axis=1) < 0.35
+    irradiance[dark] = 0.0  # a region no light reaches but through sample 11's rays
+    irradiance[11] = 9.0
+    checked = neighbours.check(device, device.to_device(float4_rows(positions)), device.to_device(float4_rows(normals)),
+                               device.to_device(float4_rows(irradiance)), device.to_device(np.ones(m, np.float32)), m)
+    out = device.read(checked.irradiance, (m, 4), np.float32)[:, :3]
+    # the host's reading: an outlier down to OUTLIER_RATIO x its neighbours' median; where that
+    # median is 0, its light split evenly over itself and the samples that list it and face its way
+    facing = (normals @ normals.T > neighbours.SHARE_COS)[np.arange(m)[:, None], nearest]
+    limit = neighbours.OUTLIER_RATIO * np.median(irradiance[nearest, 0], axis=1)
+    lone = (limit == 0.0) & (irradiance[:, 0] > 0.0)
+    kept = np.where(lone, 0.0, np.minimum(irradiance[:, 0], limit))
+    receivers = np.bincount(nearest[facing], minlength=m)
+    share = np.where(lone, irradiance[:, 0], 0.0) / (1 + receivers)
+    expected = kept + share + (share[nearest] * facing).sum(axis=1)
+    np.testing.assert_allclose(out[:, 0], expected, rtol=1e-5)
+    assert abs(out[7, 0] - 4.0) < 1e-5 and checked.outliers_clamped >= 2
+    # sample 11's light is shared, the sideways sample left out, and no shared light is lost
+    assert out[sideways, 0] == 0.0 and out[11, 0] == np.float32(9.0 / (1 + receivers[11])) and receivers[11] >= 4
+    dropped = np.where(lone, 0.0, irradiance[:, 0] - kept)
+    np.testing.assert_allclose(out[:, 0].sum(), (irradiance[:, 0] - dropped).sum(), rtol=1e-5)
+    # the patch stays lit where its samples' neighbours are in it too; samples away from the
+    # outlier and the dark region are untouched
     inner = bright & bright[nearest].all(axis=1)
-    assert inner.sum() > 10 and np.all(clamped[inner] == 50.0)
-    assert np.all(clamped[~bright & (np.arange(400) != 7)] == 1.0)
-    assert checked.outliers_clamped >= 1
+    assert inner.sum() > 10 and np.all(out[inner] == 50.0)
+    away = ~bright & (np.linalg.norm(positions[:, :2] - [-0.6, 0.6], axis=1) > 0.7) & (np.arange(m) != 7)
+    assert np.all(out[away & ~np.isin(np.arange(m), nearest[7])] == 1.0) and away.sum() > 150
 
 
 def _clamped_radii(device, positions, radii):
     """neighbours.check's R_j of samples at ``positions`` with distances ``radii``."""
     m = len(positions)
-    checked = neighbours.check(device, device.to_device(float4_rows(positions)),
+    up = device.to_device(float4_rows(np.tile(np.float32([0.0, 0.0, 1.0]), (m, 1))))
+    checked = neighbours.check(device, device.to_device(float4_rows(positions)), up,
                                device.to_device(float4_rows(np.ones((m, 3), np.float32))),
                                device.to_device(np.asarray(radii, np.float32)), m)
     return device.read(checked.radii, m, np.float32), checked.radii_clamped

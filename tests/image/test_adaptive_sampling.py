@@ -3,6 +3,8 @@ stop taking samples once their noise, measured as Cycles measures it, is
 below the threshold; noisy pixels and their neighbours go on to the
 samples setting."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scenes_py import camera_looking_down, plane_scene, quad
@@ -85,8 +87,10 @@ def area_light(side):
                 axis_u=(side, 0, 0), axis_v=(0, side, 0), shape=0)
 
 
-def test_a_loose_threshold_stops_every_pixel_at_min_samples_with_the_same_image(device):
+@pytest.mark.parametrize("border", [None, (5, 3, 29, 20)])
+def test_a_loose_threshold_stops_every_pixel_at_min_samples_with_the_same_image(device, border):
     scene = lit_plane(POINT)
+    scene.camera = dataclasses.replace(scene.camera, border=border)  # a render window too
     adaptive = Renderer(device).render(scene, RenderSettings(samples=16, min_samples=4, noise_threshold=1.0,
                                                               denoising_passes=True, light_passes=True))
     plain = Renderer(device).render(scene, RenderSettings(samples=4, denoising_passes=True, light_passes=True))
@@ -147,3 +151,19 @@ def test_film_memory_counts_the_adaptive_buffers_and_the_threshold_matches_cycle
     # out-of-range values are clamped, not trusted
     assert RenderSettings(noise_threshold=-1.0).validated().noise_threshold == 0.0
     assert RenderSettings(min_samples=-3).validated().min_samples == 0
+
+
+@pytest.mark.parametrize("power", [1e-6, 1e6])
+def test_dim_and_blinding_lights_stay_finite_and_within_the_sample_bounds(device, power):
+    light = dict(area_light(0.3), power=(power,) * 3)
+    scene = plane_scene(Lights.make([light]), camera_looking_down(size=SIZE), extra_tris=[quad((0.0, 0.0, 0.5), 0.3)],
+                        extra_materials=[{"base_color": (0.8, 0.8, 0.8), "name": "blocker"}])
+    result = Renderer(device).render(scene, RenderSettings(samples=32, min_samples=8, noise_threshold=0.01))
+    assert np.isfinite(result.passes["Combined"]).all()
+    assert 8.0 <= result.stats["adaptive"]["mean_samples"] <= 32.0
+    # above a brightness of 1 the noise is taken relative to the brightness itself (overexposed,
+    # as Cycles takes it): a blinding light stops pixels no later than the usual one
+    if power > 1.0:
+        reference = Renderer(device).render(dataclasses.replace(scene, lights=Lights.make([area_light(0.3)])),
+                                            RenderSettings(samples=32, min_samples=8, noise_threshold=0.01))
+        assert result.stats["adaptive"]["mean_samples"] <= reference.stats["adaptive"]["mean_samples"]

@@ -5,7 +5,13 @@ focused caustic) make one sample far brighter than its neighbours, and
 interpolation would spread it into a blotch on the wall. Each sample's
 irradiance is brought down to OUTLIER_RATIO times the median of its
 NEIGHBOURS nearest samples' (luminance); where the neighbours see the light
-too, nothing changes.
+too, nothing changes. Where no neighbour saw any light (their median is 0)
+there is nothing to bring a sample down to: its light is shared instead,
+evenly between it and the samples that list it among their neighbours and
+face its way, so the neighbourhood keeps it. A surface lit only by a small,
+bright object is such a place: most of its samples' rays miss the object,
+and dropping the light of the few that meet it made the floor of
+light_spot.blend a quarter too dark.
 
 Neighbour clamping [Krivanek et al. 2006]: a sample's harmonic-mean hit
 distance R_j sets how far it is trusted (interpolation.py), and a sample
@@ -29,9 +35,11 @@ from ...device import Device, primitives
 
 NEIGHBOURS = 8  # samples a cache sample is compared with
 OUTLIER_RATIO = 4.0  # largest irradiance of a sample over its neighbours' median
+SHARE_COS = 0.9  # samples whose normals are within about 25 degrees share a lone sample's light
 RADIUS_ROUNDS = 8  # rounds of neighbour clamping (the Cornell box's radii settle within 6)
 _PROGRAM = "gi/cache/neighbours.cl"
-_DEFINES = {"KNN_K": NEIGHBOURS + 1, "NEIGHBOURS": NEIGHBOURS, "OUTLIER_RATIO": f"{OUTLIER_RATIO!r}f"}
+_DEFINES = {"KNN_K": NEIGHBOURS + 1, "NEIGHBOURS": NEIGHBOURS, "OUTLIER_RATIO": f"{OUTLIER_RATIO!r}f",
+            "NEIGHBOURS_SHARE_COS": f"{SHARE_COS!r}f"}
 
 
 def programs() -> list[tuple[str, dict]]:
@@ -40,8 +48,9 @@ def programs() -> list[tuple[str, dict]]:
 
 @dataclass
 class Checked:
-    """The samples' irradiance with lone outliers brought down and their
-    distances R_j clamped by their neighbours', and how many of each."""
+    """The samples' irradiance with lone outliers brought down (or, among
+    dark neighbours, their light shared) and their distances R_j clamped by
+    their neighbours', and how many of each."""
 
     irradiance: cl.Buffer  # float4 per sample
     radii: cl.Buffer  # float per sample
@@ -49,17 +58,22 @@ class Checked:
     radii_clamped: int
 
 
-def check(device: Device, positions: cl.Buffer, irradiance: cl.Buffer, radii: cl.Buffer, m: int) -> Checked:
-    """The ``m`` samples (float4 positions and irradiance, float R_j)
-    checked against their NEIGHBOURS nearest; with no more samples than
-    that, as they are."""
+def check(device: Device, positions: cl.Buffer, normals: cl.Buffer, irradiance: cl.Buffer, radii: cl.Buffer,
+          m: int) -> Checked:
+    """The ``m`` samples (float4 positions, unit normals and irradiance,
+    float R_j) checked against their NEIGHBOURS nearest; with no more
+    samples than that, as they are."""
     if m <= NEIGHBOURS:
         return Checked(irradiance, radii, 0, 0)
     tree = PointTree.from_device(device, primitives.indexed_points(device, positions, m))
-    out, ids, dists = device.empty(16 * m), device.empty(4 * NEIGHBOURS * m), device.empty(4 * NEIGHBOURS * m)
-    counts = device.zeros(8)
+    clamped, excess, out = device.empty(16 * m), device.empty(16 * m), device.empty(16 * m)
+    ids, dists = device.empty(4 * NEIGHBOURS * m), device.empty(4 * NEIGHBOURS * m)
+    counts, receivers = device.zeros(8), device.zeros(4 * m)
     device.kernel(_PROGRAM, "Neighbours_clamp_outliers", _DEFINES)(
-        m, *tree.kernel_args(), positions, irradiance, np.int32(m), out, ids, dists, counts)
+        m, *tree.kernel_args(), positions, normals, irradiance, np.int32(m), clamped, excess, ids, dists, receivers,
+        counts)
+    device.kernel(_PROGRAM, "Neighbours_share_excess", _DEFINES)(
+        m, ids, normals, clamped, excess, receivers, np.int32(m), out)
     # Jacobi rounds between two buffers, the gathered R_j left as they are
     clamp_radii = device.kernel(_PROGRAM, "Neighbours_clamp_radii", _DEFINES)
     turns = [device.empty(4 * m), device.empty(4 * m)]
