@@ -166,7 +166,8 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
         stats.update(sample_points=chosen.count, sample_points_reused=samples_reused,
                      selection={key: chosen.stats.get(key) for key in _SELECTION_STATS},
                      cut={**the_cut.stats, "reused": cut_reused}, gather=gathered.stats,
-                     outliers_clamped=checked.outliers_clamped, radii_clamped=checked.radii_clamped)
+                     outliers_clamped=checked.outliers_clamped, radii_clamped=checked.radii_clamped,
+                     radii_bounded=checked.radii_bounded)
     merged = _merged(device, records if kept else None, new)
     stats["records"] = {"kept": kept, "new": new.count if new else 0, "uncovered": todo.count / n}
     say("interpolation")

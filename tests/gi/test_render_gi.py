@@ -237,6 +237,20 @@ def _clamped_radii(device, positions, radii):
     return device.read(checked.radii, m, np.float32), checked.radii_clamped
 
 
+def test_samples_whose_rays_met_nothing_take_the_largest_finite_radius(device):
+    rng = np.random.default_rng(5)
+    lit = rng.uniform(-1, 1, (300, 3)).astype(np.float32)
+    far = (rng.uniform(-0.1, 0.1, (30, 3)) + [40.0, 0.0, 0.0]).astype(np.float32)  # no finite R within reach
+    radii = np.concatenate([rng.uniform(0.1, 0.5, 300), np.full(30, np.inf)]).astype(np.float32)
+    positions = np.concatenate([lit, far])
+    out, _ = _clamped_radii(device, positions, radii)
+    assert np.isfinite(out).all()
+    np.testing.assert_array_equal(out[300:], out[:300].max())
+    # with no finite distance at all there is nothing to bound them by
+    out, _ = _clamped_radii(device, far, np.full(30, np.inf, np.float32))
+    assert np.isinf(out).all()
+
+
 def test_neighbour_clamping_matches_rounds_of_the_bound_over_each_samples_nearest(device):
     from scipy.spatial import cKDTree
 

@@ -115,3 +115,23 @@ __kernel void Neighbours_clamp_radii(const __global int *ids, const __global flo
     r_out[j] = r;
     if (count && r < r_first[j]) atomic_inc(&counts[1]);
 }
+
+/* The largest finite R_j (bits of a non-negative float order as ints):
+ * bound[0], zeroed before. */
+__kernel void Neighbours_finite_max(const __global float *r, const int m, volatile __global int *bound) {
+    int j = Launch_global_id();
+    if (j >= m || !isfinite(r[j])) return;
+    atomic_max(&bound[0], as_int(fmax(r[j], 0.0f)));
+}
+
+/* A sample whose gather rays met nothing, and whose neighbours' clamping
+ * did not bound it, takes the largest finite R_j (when there is one):
+ * an infinite R_j would cover every point facing its way with a weight
+ * that drowns every other sample's. counts[2] counts them. */
+__kernel void Neighbours_bound_infinite(__global float *r, const int m, const __global int *bound,
+                                        volatile __global int *counts) {
+    int j = Launch_global_id();
+    if (j >= m || isfinite(r[j]) || bound[0] <= 0) return;
+    r[j] = as_float(bound[0]);
+    atomic_inc(&counts[2]);
+}
