@@ -131,7 +131,7 @@ __kernel void Neighbours_finite_max(const __global float *r, const int m, volati
 __kernel void Neighbours_bound_infinite(__global float *r, const int m, const __global int *bound,
                                         volatile __global int *counts) {
     int j = Launch_global_id();
-    if (j >= m || isfinite(r[j]) || bound[0] <= 0) return;
+    if (j >= m || !(isinf(r[j]) && r[j] > 0.0f) || bound[0] <= 0) return; /* NaN: left as it is */
     r[j] = as_float(bound[0]);
     atomic_inc(&counts[2]);
 }
