@@ -85,13 +85,28 @@ __kernel void Cache_sample_cells(const __global float4 *spos, const int m, const
     atomic_or(levels, 1U << g);
 }
 
-/* The hash grid of coverage spheres: the cell of each sample slot, and the
- * slots of each bucket (bucket_items[bucket_start[b] .. bucket_end[b])). */
+/* Each bucket's entries side by side, in the order of the slots grouped by
+ * bucket (bucket_items): the slot's cell and its sample's position and
+ * coverage radius, so a lookup scans its bucket's candidates in a row and
+ * reads a sample's other data only where it covers the point. */
+__kernel void Cache_bucket_entries(const __global int *bucket_items, const int count, const __global int4 *cells,
+                                   const __global float4 *spos, __global int4 *entry_cell,
+                                   __global float4 *entry_pos) {
+    int k = Launch_global_id();
+    if (k >= count) return;
+    int slot = bucket_items[k];
+    entry_cell[k] = cells[slot];
+    entry_pos[k] = spos[slot / CACHE_SLOTS];
+}
+
+/* The hash grid of coverage spheres: the slots of each bucket
+ * (bucket_items[bucket_start[b] .. bucket_end[b])) and their entries
+ * (Cache_bucket_entries). */
 #define CACHE_HASH_PARAMS                                                    \
-    const __global float4 *spos, const __global float4 *snrm, const __global float4 *sirr,          \
-        const __global float4 *sgrad,                                                               \
-        const __global float *srad, const __global int4 *cells, const __global int *bucket_start, \
-        const __global int *bucket_end, const __global int *bucket_items, const uint mask, const uint levels
+    const __global float4 *snrm, const __global float4 *sirr, const __global float4 *sgrad,            \
+        const __global float *srad, const __global int4 *entry_cell, const __global float4 *entry_pos, \
+        const __global int *bucket_start, const __global int *bucket_end, const __global int *bucket_items, \
+        const uint mask, const uint levels
 
 /* Sample j's irradiance carried to x by its bounded gradient (rows per
  * frame unit: Cache_prepare_samples) over the offset d, never negative. */
@@ -113,16 +128,17 @@ inline float3 Cache_covering_mean(CACHE_HASH_PARAMS, float3 x, float3 nx, float 
         int4 cell = Cache_level_cell(x, g);
         uint b = Cache_bucket(cell, mask);
         for (int k = bucket_start[b]; k < bucket_end[b]; ++k) {
-            int slot = bucket_items[k];
-            int4 cs = cells[slot];
+            int4 cs = entry_cell[k];
             if (cs.x != cell.x || cs.y != cell.y || cs.z != cell.z || cs.w != g) continue;
-            int j = slot / CACHE_SLOTS;
-            float3 d = x - spos[j].xyz;
+            float4 sj = entry_pos[k];
+            float3 d = x - sj.xyz;
             float dist = sqrt(dot(d, d));
+            if (dist >= sj.w) continue;
+            int j = bucket_items[k] / CACHE_SLOTS;
             float3 nj = snrm[j].xyz;
             float cosn = dot(nx, nj);
             float rj = srad[j];
-            if (dist >= spos[j].w || cosn <= CACHE_MIN_COS || dot(d, nx + nj) < -behind * rj) continue;
+            if (cosn <= CACHE_MIN_COS || dot(d, nx + nj) < -behind * rj) continue;
             float w = 1.0f / fmax(dist / rj + Cache_chord(nx, nj), 1e-6f);
             *wsum += w;
             /* the first sample is taken as it is (w / w need not round to 1) */
@@ -186,13 +202,14 @@ inline int Cache_nearest_sample(const __global float4 *spos, const __global floa
  * compatible sample, 3 nearest sample, 0 no samples at all.
  * spos: xyz, w = coverage radius a R_j; srad: R_j (both normalised). */
 __kernel void Cache_interpolate(const __global float4 *pos, const __global float4 *nrm, const int n,
-                                CACHE_HASH_PARAMS, CACHE_GRID_PARAMS, const int m, const float behind,
+                                const __global float4 *spos, CACHE_HASH_PARAMS, CACHE_GRID_PARAMS, const int m,
+                                const float behind,
                                 __global float4 *out, __global int *flag) {
     int i = Launch_global_id();
     if (i >= n) return;
     float3 x = pos[i].xyz, nx = nrm[i].xyz;
     float wsum;
-    float3 mean = Cache_covering_mean(spos, snrm, sirr, sgrad, srad, cells, bucket_start, bucket_end,
+    float3 mean = Cache_covering_mean(snrm, sirr, sgrad, srad, entry_cell, entry_pos, bucket_start, bucket_end,
                                       bucket_items, mask, levels, x, nx, behind, &wsum);
     if (wsum > 0.0f) {
         out[i] = (float4)(mean, 0.0f);

@@ -93,6 +93,8 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
         cells, keys, levels = device.empty(16 * slots), device.empty(4 * slots), device.zeros(4)
         _k(device, "Cache_sample_cells")(m, d_spos, np.int32(m), np.uint32(table - 1), cells, keys, levels)
         buckets = primitives.group(device, keys, slots, table + 1)
+        entry_cell, entry_pos = device.empty(16 * slots), device.empty(16 * slots)
+        _k(device, "Cache_bucket_entries")(slots, buckets.order, np.int32(slots), cells, d_spos, entry_cell, entry_pos)
         level_bits = device.scalar(levels, np.uint32)
         # uniform grid of sample positions for the nearest-sample fallback
         lo, hi = primitives.bounds(device, d_spos, m)
@@ -100,8 +102,8 @@ def interpolate_on_device(device: Device, spos: cl.Buffer, snrm: cl.Buffer, sirr
     with timer.stage("interpolate"):
         flag = device.empty(4 * n) if flag is None else flag
         _k(device, "Cache_interpolate")(
-            n, d_pos, nrm, np.int32(n), d_spos, snrm, sirr, d_sgrad, d_srad, cells, buckets.start, buckets.end,
-            buckets.order, np.uint32(table - 1), np.uint32(level_bits), *grid.kernel_args(), np.int32(m),
+            n, d_pos, nrm, np.int32(n), d_spos, snrm, sirr, d_sgrad, d_srad, entry_cell, entry_pos, buckets.start,
+            buckets.end, buckets.order, np.uint32(table - 1), np.uint32(level_bits), *grid.kernel_args(), np.int32(m),
             np.float32(behind), out, flag)
         kinds = _flag_counts(device, flag, n)
     stats.update(covered=float(kinds[1]) / n, fallback=int(kinds[2] + kinds[3]), fallback_any_normal=int(kinds[3]))
