@@ -43,6 +43,32 @@ inline float3 PhotonEmit_disk_origin(float4 sphere, float3 dir, float u1, float 
     return sphere.xyz - 1.01f * sphere.w * dir + d.x * t + d.y * b;
 }
 
+/* The bits of x at even places, gathered (a Morton code's x). */
+inline uint PhotonEmit_compact(uint x) {
+    x &= 0x55555555u;
+    x = (x | (x >> 1)) & 0x33333333u;
+    x = (x | (x >> 2)) & 0x0f0f0f0fu;
+    x = (x | (x >> 4)) & 0x00ff00ffu;
+    x = (x | (x >> 8)) & 0x0000ffffu;
+    return x;
+}
+
+/* A direction sample of photon j of `count`: t = (j + u) / count, uniform
+ * over [0, 1) across the photons, picks a cell of a g x g square in Morton
+ * order (g the largest power of two with g^2 <= count, at most 2048), and
+ * (v1, v2) a point in it. Every point of the square is as likely as
+ * before, the photons stratified along the curve, and photons next to each
+ * other leave in directions next to each other, so the rays a work-group
+ * traces first run through the same part of the kd-tree. */
+inline float2 PhotonEmit_ordered(int j, int count, float u, float v1, float v2) {
+    int g = 1;
+    while (4 * g * g <= count && g < 2048) g *= 2;
+    float t = ((float)j + u) / (float)max(count, 1);
+    uint cell = min((uint)(t * (float)(g * g)), (uint)(g * g - 1));
+    float2 c = (float2)((float)PhotonEmit_compact(cell), (float)PhotonEmit_compact(cell >> 1));
+    return fmin((c + (float2)(v1, v2)) / (float)g, (float2)(0x1.fffffep-1f));
+}
+
 /* Emissive triangles: the one picked by u0 on the power CDF, a uniform
  * point and face, and the power of a photon from it out of `count`. */
 inline PhotonRay PhotonEmit_mesh(const Emitters *em, int count, float u0, Rng *rng) {
@@ -102,16 +128,18 @@ inline PhotonRay PhotonEmit_photon(const PhotonEmitter *e, const __global Light 
     if (l.kind == LIGHT_AREA) {
         float2 q = l.shape == AREA_ELLIPSE ? 0.5f * Sampling_disk(u1, u2) : (float2)(u1 - 0.5f, u2 - 0.5f);
         r.org = l.position.xyz + q.x * l.axis_u.xyz + q.y * l.axis_v.xyz;
-        float d1 = Rng_next(rng), d2 = Rng_next(rng);
-        r.dir = Sampling_cosine(l.direction.xyz, d1, d2);
+        float d0 = Rng_next(rng), d1 = Rng_next(rng), d2 = Rng_next(rng);
+        float2 d = PhotonEmit_ordered(j, e->count, d0, d1, d2);
+        r.dir = Sampling_cosine(l.direction.xyz, d.x, d.y);
         return r;
     }
     r.org = l.position.xyz;
+    float2 d = PhotonEmit_ordered(j, e->count, u1, u2, Rng_next(rng));
     if (l.kind == LIGHT_SPOT) {
-        r.dir = Sampling_cone(l.direction.xyz, l.cos_half, u1, u2);
+        r.dir = Sampling_cone(l.direction.xyz, l.cos_half, d.x, d.y);
         r.power *= Light_spot_attenuation(&l, r.dir);
     } else {
-        r.dir = PhotonEmit_sphere(u1, u2);
+        r.dir = PhotonEmit_sphere(d.x, d.y);
     }
     return r;
 }

@@ -206,19 +206,28 @@ def test_a_material_edit_keeps_the_images_pixels(room):
 ], ids=["light_power", "material_colour", "move_object", "nothing"])
 def test_the_renderer_reuses_what_an_edit_left_and_renders_the_fresh_image(room, device, edit, kdtree, photons):
     bpy, edits, *_ = room
+    # reweighted maps hold other photons than a fresh trace (a photon's
+    # direction depends on how many its light sends): enough photons and
+    # gather rays that the image's photon noise stays within the bounds below
+    settings = dataclasses.replace(AFRESH, global_photons=20_000, gather_rays=256) if photons.endswith("_reweighted") \
+        else AFRESH
     sync, renderer = SceneSync(), Renderer(device)
     scene, changed = _synced(bpy, sync)
-    renderer.render(scene, AFRESH, edits=changed)
+    renderer.render(scene, settings, edits=changed)
     scene, changed = _synced(bpy, sync, edits.apply(lambda: edit(bpy)))
-    result = renderer.render(scene, AFRESH, edits=changed)
+    result = renderer.render(scene, settings, edits=changed)
     assert kdtree in result.stats["plan"] and photons in result.stats["plan"]
-    fresh = Renderer(device).render(export_scene(bpy.context.evaluated_depsgraph_get()), AFRESH)
+    fresh = Renderer(device).render(export_scene(bpy.context.evaluated_depsgraph_get()), settings)
     if photons.endswith("_reweighted"):
         # the light and the world share the photons as they did before the
-        # edit, each reweighted: the fresh render's image within its noise
+        # edit, each reweighted: the fresh render's image within its noise,
+        # its mean to 0.5% and its pixels no farther from it than those of a
+        # fresh render of another seed
         ours, theirs = result.passes["Combined"][..., :3], fresh.passes["Combined"][..., :3]
+        other = Renderer(device).render(export_scene(bpy.context.evaluated_depsgraph_get()),
+                                        dataclasses.replace(settings, seed=settings.seed + 1)).passes["Combined"][..., :3]
         np.testing.assert_allclose(ours.mean(), theirs.mean(), rtol=5e-3)
-        np.testing.assert_allclose(ours, theirs, rtol=0.1)
+        assert np.abs(ours - theirs).mean() <= np.abs(other - theirs).mean()
     else:
         np.testing.assert_array_equal(result.passes["Combined"], fresh.passes["Combined"])
 

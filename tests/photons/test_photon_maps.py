@@ -87,6 +87,26 @@ def test_a_bright_closed_box_is_traced_once_into_buffers_sized_by_a_sample(devic
     np.testing.assert_array_equal(short.global_map.photons()["power"], sized.global_map.photons()["power"])
 
 
+def test_photons_in_a_row_leave_in_neighbouring_directions_covering_all_evenly(device):
+    # a point light inside a closed box, one store per photon (no bounce):
+    # the stored photons in photon order, each with the direction it left in
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 0), power=(10, 10, 10))])
+    n = 26000  # not a multiple of the 128 x 128 cells: 1.6 photons a cell
+    maps = trace_photon_maps(device, closed_box(0.5, lights), global_photons=n, seed=4, max_bounces=0)
+    tree = maps.global_map
+    assert tree.point_count == n
+    left = np.empty((n, 3))
+    left[tree.leaf_order()] = -tree.photons()["direction"]
+    # next to each other in photon order, next to each other in direction
+    # (independent directions would give a mean cosine of 0)
+    assert np.mean(np.sum(left[1:] * left[:-1], axis=1)) > 0.9
+    # and every direction as likely: z and the azimuth in eight equal bins
+    z = np.histogram(left[:, 2], bins=8, range=(-1, 1))[0]
+    azimuth = np.histogram(np.arctan2(left[:, 1], left[:, 0]), bins=8, range=(-np.pi, np.pi))[0]
+    np.testing.assert_allclose(z, n / 8, rtol=0.04)
+    np.testing.assert_allclose(azimuth, n / 8, rtol=0.04)
+
+
 def test_bounce_limit_ends_paths(device):
     lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 0), power=(10, 10, 10))])
     maps = trace_photon_maps(device, closed_box(1.0, lights), global_photons=2000, max_bounces=3)
