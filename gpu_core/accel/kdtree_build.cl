@@ -522,19 +522,13 @@ inline float KdBuild_plane(const __global float4 *sel_lo, const __global float4 
     return face[4 * e + ((c % 6) >> 1)];
 }
 
-/* SAH cost of candidate c (of the small root's element k) for a node with
- * element mask `mask` and cell [lo, hi]; kept in *best_cost / *best_cand
- * when lower. Planes outside the open cell are skipped. */
-inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
-                             float4 hi, float area,
-                             const __global float4 *sel_lo,
-                             const __global float4 *sel_hi,
-                             const __global ulong2 *cand, float *best_cost,
-                             int *best_cand) {
-    int axis = (c % 6) >> 1;
-    float plane = KdBuild_plane(sel_lo, sel_hi, root.x + k, c);
+/* SAH cost of candidate c, the plane at `plane` on `axis` with element
+ * masks m (below, above), for a node with element mask `mask` and cell
+ * [lo, hi]; kept in *best_cost / *best_cand when lower. Planes outside the
+ * open cell are skipped. */
+inline void KdBuild_consider_plane(int c, int axis, float plane, ulong2 m, ulong mask, float4 lo,
+                                   float4 hi, float area, float *best_cost, int *best_cand) {
     if (!(Axis_of(lo, axis) < plane && plane < Axis_of(hi, axis))) return;
-    ulong2 m = cand[6 * root.x + c];
     float below = (float)popcount(m.x & mask);
     float above = (float)popcount(m.y & mask);
     float cost = KD_COST_TRAVERSE +
@@ -544,6 +538,34 @@ inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
         *best_cost = cost;
         *best_cand = c;
     }
+}
+
+/* KdBuild_consider_plane for candidate c of the small root's element k. */
+inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
+                             float4 hi, float area,
+                             const __global float4 *sel_lo,
+                             const __global float4 *sel_hi,
+                             const __global ulong2 *cand, float *best_cost,
+                             int *best_cand) {
+    KdBuild_consider_plane(c, (c % 6) >> 1, KdBuild_plane(sel_lo, sel_hi, root.x + k, c), cand[6 * root.x + c], mask,
+                           lo, hi, area, best_cost, best_cand);
+}
+
+/* The six candidates of the small root's element k in order (low, high
+ * face on x, then y, then z), each with its axis known where it is
+ * compiled. */
+inline void KdBuild_consider_element(int k, ulong mask, int4 root, float4 lo, float4 hi, float area,
+                                     const __global float4 *sel_lo, const __global float4 *sel_hi,
+                                     const __global ulong2 *cand, float *best_cost, int *best_cand) {
+    float4 e_lo = sel_lo[root.x + k], e_hi = sel_hi[root.x + k];
+    const __global ulong2 *m = cand + 6 * (root.x + k);
+    int c = 6 * k;
+    KdBuild_consider_plane(c, 0, e_lo.x, m[0], mask, lo, hi, area, best_cost, best_cand);
+    KdBuild_consider_plane(c + 1, 0, e_hi.x, m[1], mask, lo, hi, area, best_cost, best_cand);
+    KdBuild_consider_plane(c + 2, 1, e_lo.y, m[2], mask, lo, hi, area, best_cost, best_cand);
+    KdBuild_consider_plane(c + 3, 1, e_hi.y, m[3], mask, lo, hi, area, best_cost, best_cand);
+    KdBuild_consider_plane(c + 4, 2, e_lo.z, m[4], mask, lo, hi, area, best_cost, best_cand);
+    KdBuild_consider_plane(c + 5, 2, e_hi.z, m[5], mask, lo, hi, area, best_cost, best_cand);
 }
 
 /* Per small node (KD_SAH_LANES work-items each, sharing its candidates):
@@ -583,12 +605,9 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
         if (rec_info[node.y].w < max_depth && area > 0.0f && leaf_cost > KD_COST_TRAVERSE) {
 #if KD_SAH_LANES == 1
             /* the candidates of the node's elements only, lowest bit first */
-            for (ulong left = mask; left != 0UL; left &= left - 1UL) {
-                int k = popcount((left & (~left + 1UL)) - 1UL);
-                for (int c = 6 * k; c < 6 * k + 6; ++c)
-                    KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand,
-                                     &my_cost, &my_cand);
-            }
+            for (ulong left = mask; left != 0UL; left &= left - 1UL)
+                KdBuild_consider_element(popcount((left & (~left + 1UL)) - 1UL), mask, root, lo, hi, area,
+                                         sel_lo, sel_hi, cand, &my_cost, &my_cand);
 #else
             for (int c = lane; c < 6 * root.y; c += KD_SAH_LANES) {
                 int k = c / 6;
