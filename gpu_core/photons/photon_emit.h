@@ -61,8 +61,7 @@ inline uint PhotonEmit_compact(uint x) {
  * other leave in directions next to each other, so the rays a work-group
  * traces first run through the same part of the kd-tree. */
 inline float2 PhotonEmit_ordered(int j, int count, float u, float v1, float v2) {
-    int g = 1;
-    while (4 * g * g <= count && g < 2048) g *= 2;
+    int g = 1 << min((31 - (int)clz(max(count, 1))) / 2, 11);
     float t = ((float)j + u) / (float)max(count, 1);
     uint cell = min((uint)(t * (float)(g * g)), (uint)(g * g - 1));
     float2 c = (float2)((float)PhotonEmit_compact(cell), (float)PhotonEmit_compact(cell >> 1));
