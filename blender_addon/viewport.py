@@ -5,12 +5,15 @@ After an edit or a view change the worker renders a coarse image first (a
 quarter of the resolution, one sample, an eighth of the photons where the
 edit makes them traced again), then the full resolution with one
 sample, then keeps adding samples (1, 2, 4, ... per pass, up to
-``MAX_PASS_SAMPLES``) into an accumulation buffer until Viewport Samples
-(0: until stopped), denoising the last when Denoise Viewport is on. The
-passes of one view share everything the renderer holds: the photon maps,
-the kd-tree and the GI cache of the view are computed once, later passes
-only run the image kernel, numbered by ``sample_start`` so that together
-they are one render of all their samples. An edit names the parts it
+``MAX_PASS_SAMPLES``) until Viewport Samples (0: until stopped), denoising
+the last when Denoise Viewport is on. The passes of one view share
+everything the renderer holds: the photon maps, the kd-tree and the GI
+cache of the view are computed once, and later passes only run the image
+kernel into the renderer's film, which each continues (numbered by
+``sample_start``, they are one render of all their samples). With a
+Viewport Noise Threshold the pixels whose noise has settled below it sit
+the later passes out (adaptive sampling, as Cycles' viewport does), and
+the view is done once every pixel has. An edit names the parts it
 changed, which the renderer alone uploads and invalidates. Nothing here
 touches Blender data: the engine passes exported scenes, cameras and
 settings in.
@@ -37,7 +40,7 @@ COARSE_FACTOR = 4
 COARSE_MIN_CACHE_POINTS = 32
 # share of the photons a coarse pass traces when the maps held cannot serve it
 COARSE_PHOTON_SHARE = 0.125
-# the denoiser's guides, accumulated beside the image
+# the denoiser's guides, the film's means beside the image
 DENOISE_GUIDES = ("Denoising Albedo", "Denoising Normal")
 # shortest time between two status-line redraws during a pass
 STATUS_SECONDS = 0.1
@@ -46,6 +49,9 @@ MAX_PASS_SAMPLES = 16
 # aimed duration of one image launch in the viewport: an edit waits for the
 # launch running when it comes (F12 keeps the renderer's 0.1 s)
 BATCH_SECONDS = 0.03
+# samples every pixel takes before its noise is judged, with Min Samples 0
+# and Viewport Samples 0 (until stopped); else a quarter of Viewport Samples
+OPEN_MIN_SAMPLES = 16
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,17 +134,22 @@ def passes(job: Job):
 
 def pass_settings(settings, step: Pass):
     """The settings of one pass: its samples, never denoised by the renderer
-    (the session denoises the accumulated image), the denoiser's guides on
+    (the session denoises the finished image), the denoiser's guides on
     full passes when asked; a coarse pass has as many cache points per
     pixel as the full one (a 16th of them) and, where the photon maps must
     be traced (an edit of the lit scene), an eighth of the photons (the
     full pass traces them all), so it stays quick. Every pass launches the
     image kernel in shorter batches than F12, so an edit waits less for
-    the launch it comes during. Every pixel takes every sample of a pass
-    (no noise threshold): the accumulation weighs a pass by its samples,
-    the same in every pixel."""
+    the launch it comes during. A full pass judges noise against the
+    Viewport Noise Threshold once every pixel has the minimum samples (Min
+    Samples, else a quarter of Viewport Samples, at least 4); a coarse
+    pass takes every sample."""
+    target = int(settings.samples)
+    minimum = settings.min_samples or (max(4, target // 4) if target > 0 else OPEN_MIN_SAMPLES)
     settings = dataclasses.replace(settings, samples=step.samples, denoise=False, batch_seconds=BATCH_SECONDS,
-                                   denoising_passes=bool(settings.denoise) and not step.coarse, noise_threshold=0.0)
+                                   denoising_passes=bool(settings.denoise) and not step.coarse,
+                                   noise_threshold=0.0 if step.coarse else settings.preview_noise_threshold,
+                                   min_samples=minimum)
     if step.coarse:
         seeds = max(COARSE_MIN_CACHE_POINTS, settings.cache_seeds // COARSE_FACTOR**2)
         settings = dataclasses.replace(settings, cache_seeds=min(settings.cache_seeds, seeds),
@@ -147,38 +158,41 @@ def pass_settings(settings, step: Pass):
 
 
 class Accumulation:
-    """The full-resolution image of one view: the sample-weighted mean of
-    its passes, denoised after the last one when asked (guided by the mean
-    denoising albedo and normal)."""
+    """The full-resolution image of one view: the renderer's film after
+    each full pass (the mean of every sample so far), denoised once the
+    view is done (Viewport Samples taken, or every pixel settled below the
+    Viewport Noise Threshold) when asked, guided by the film's denoising
+    albedo and normal."""
 
     def __init__(self, target: int, denoise: bool, quality: str):
         self.target, self.denoise, self.quality = int(target), bool(denoise), quality
         self.samples = 0
-        self._sums: dict[str, np.ndarray] = {}
+        self.done = False
 
-    def add(self, step: Pass, result_passes: dict) -> tuple[np.ndarray, str]:
+    def add(self, step: Pass, result) -> tuple[np.ndarray, str]:
         """The image to show after ``step`` and its status label."""
         if step.coarse:
-            return result_passes["Combined"], "preview"
-        for name in ("Combined", *DENOISE_GUIDES):
-            if name in result_passes:
-                weighted = result_passes[name] * np.float32(step.samples)
-                self._sums[name] = self._sums[name] + weighted if name in self._sums else weighted
-        self.samples += step.samples
-        image = self._sums["Combined"] / np.float32(self.samples)
-        label = self.label(self.samples)
-        if self.denoise and self.samples >= self.target > 0:
-            guides = [self._sums[name] / np.float32(self.samples) for name in DENOISE_GUIDES]
+            return result.passes["Combined"], "preview"
+        held = result.stats["accumulated"]
+        self.samples = int(held["samples"])
+        self.done = bool(held["converged"]) or self.samples >= self.target > 0
+        image = result.passes["Combined"]
+        label = self.label(self.samples, float(held["mean_samples"]), bool(held["converged"]))
+        if self.denoise and self.done:
             try:
-                image = denoise(image, guides[0], guides[1], self.quality)
+                image = denoise(image, *(result.passes[name] for name in DENOISE_GUIDES), self.quality)
                 label += ", denoised"
             except GpuGiError as err:
                 label += f", not denoised: {err}"
         return image, label
 
-    def label(self, samples: int) -> str:
-        """'sample 12/32' (or 'sample 12' without a target)."""
-        return f"sample {samples}" + (f"/{self.target}" if self.target > 0 else "")
+    def label(self, samples: int, mean: float | None = None, settled: bool = False) -> str:
+        """'sample 12/32' (or 'sample 12' without a target), with the mean a
+        pixel took where pixels sat passes out, and 'settled' once all do."""
+        text = f"sample {samples}" + (f"/{self.target}" if self.target > 0 else "")
+        if mean is not None and mean < samples:
+            text += f" ({mean:.1f} per pixel)"
+        return text + (", settled" if settled else "")
 
 
 class ViewportSession:
@@ -313,10 +327,11 @@ class ViewportSession:
                         return  # the edits pending stay for the next job
                     edits, self._pending[job.device_spec] = self._pending.get(job.device_spec), set()
                 result = renderer.render(scene, settings, progress=self._progress(step, film, stop),
-                                         should_stop=stop.is_set, edits=edits, sample_start=step.start)
+                                         should_stop=stop.is_set, edits=edits, sample_start=step.start,
+                                         accumulate=not step.coarse)
                 if stop.is_set():
                     return
-                image, label = film.add(step, result.passes)
+                image, label = film.add(step, result)
                 with self._lock:
                     self._image = image
                     self._version += 1
@@ -324,6 +339,8 @@ class ViewportSession:
                 self.first_plan = self.first_plan or list(result.stats.get("plan", []))
                 self.status = status_line(result, label)
                 self._notify()
+                if film.done:
+                    return
         except RenderCancelled:
             return
         except GpuGiError as err:

@@ -26,7 +26,7 @@ from .device.timer import StageTimer
 from .errors import DeviceError, GpuGiError, check_stop
 from .gi.cache.samples import HeldSamples
 from .gi.pipeline import GiField, render_gi
-from .image import DENOISING_PASSES, LIGHT_PASSES, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
+from .image import DENOISING_PASSES, LIGHT_PASSES, ImageFilm, render_image  # noqa: F401  (LIGHT_PASSES: pass names)
 from .photons.reweight import reweight_maps
 from .photons.aim import caustic_boxes
 from .photons.trace import PhotonMaps, PhotonSettings, trace_maps, traced_maps
@@ -67,21 +67,30 @@ class Renderer:
         self._samples = HeldSamples()  # cache points of the latest renders, kept for the same shading points
         self._unsynced: set[str] = set()  # parts named in edits and not uploaded yet (a render was stopped)
         self._geometry = GeometryMemo()  # the last scene's checked geometry
+        self._film: ImageFilm | None = None  # the image that accumulating passes continue
 
     def render(self, scene: Scene, settings: RenderSettings | None = None,
                progress: Callable[[float, str], None] | None = None,
                should_stop: Callable[[], bool] | None = None, edits: set[str] | None = None,
-               sample_start: int = 0) -> RenderResult:
+               sample_start: int = 0, accumulate: bool = False) -> RenderResult:
         """Render ``scene``; ``edits``, when the caller knows them, names the
         parts changed since this renderer's last call (scene/model.py PARTS;
         the camera is compared anyway). ``sample_start`` numbers the first
         camera path of every pixel: renders of ``samples`` paths from 0,
         ``samples``, 2 ``samples``... average to one render of all of them
-        (progressive refinement). An OpenCL failure on the way (out of
+        (progressive refinement). With ``accumulate`` the renderer does that
+        averaging itself: a render whose ``sample_start`` is where the last
+        accumulating render of the same image (scene, view, settings but
+        the samples, noise threshold and min samples) ended continues its
+        film, and its passes are the mean of every sample since the film
+        began (stats ``accumulated``: its samples, the mean a pixel took,
+        whether every pixel has settled below the noise threshold, the
+        first sample's number); with a noise threshold, pixels that have
+        settled take no more samples. An OpenCL failure on the way (out of
         memory or resources, a lost device) is a DeviceError saying so, and
         the renderer forgets what it held: the next render starts afresh."""
         try:
-            return self._render(scene, settings, progress, should_stop, edits, sample_start)
+            return self._render(scene, settings, progress, should_stop, edits, sample_start, accumulate)
         except cl.Error as err:
             self._forget()
             raise DeviceError(device_failure(self.device.name, err)) from err
@@ -94,9 +103,10 @@ class Renderer:
         self._held, self._buffers, self._maps, self._cache, self._records = Held(), None, None, None, {}
         self._samples = HeldSamples()
         self._unsynced = set()
+        self._film = None
 
     def _render(self, scene: Scene, settings: RenderSettings | None, progress, should_stop, edits,
-                sample_start: int) -> RenderResult:
+                sample_start: int, accumulate: bool) -> RenderResult:
         settings = (settings or RenderSettings()).validated()
         if edits is not None:
             edits = self._unsynced = set(edits) | self._unsynced
@@ -126,9 +136,10 @@ class Renderer:
             check_stop(should_stop)
             field_ = self._gi_cache(scene, settings, the_plan, maps, timer, should_stop, say)
             check_stop(should_stop)
+        film = self._continued_film(scene, settings, the_plan, sample_start) if accumulate else None
         with timer.stage("render"):
             passes, image = render_image(self.device, self._buffers, scene, settings, the_plan.image_defines,
-                                         field_, progress, should_stop, sample_start)
+                                         field_, progress, should_stop, sample_start, film)
         warnings, denoised = self._warnings(scene), False
         if settings.denoise:
             if progress is not None:
@@ -204,6 +215,24 @@ class Renderer:
             self._records.pop(next(iter(self._records)))
         self._held.records_keys = tuple(self._records)
 
+    def _continued_film(self, scene: Scene, settings: RenderSettings, the_plan: Plan, sample_start: int) -> ImageFilm:
+        """The film an accumulating render goes on with: the one held when
+        it holds the same image up to ``sample_start``, else a new one (held
+        from now on)."""
+        x0, y0, x1, y1 = scene.camera.pixel_window
+        same_image = replace(settings, samples=1, noise_threshold=0.0, min_samples=0, batch_seconds=0.1,
+                             batch_pixels=1)
+        key = (tuple(the_plan.generations[p] for p in sorted(the_plan.generations)), the_plan.cache_key,
+               sorted(the_plan.image_defines.items()), scene.camera.pixel_window, same_image)
+        film = self._film
+        if (film is None or sample_start == 0 or film.key != key
+                or film.sample_start + film.samples != sample_start):
+            self._film = None  # its buffers go before the new film's are made
+            film = ImageFilm.new(self.device, (x1 - x0, y1 - y0), settings, sample_start, counted=True)
+            film.key = key
+        self._film = film
+        return film
+
     # -- report --------------------------------------------------------------------
 
     def _stats(self, scene: Scene, settings: RenderSettings, the_plan: Plan, timer: StageTimer, image: dict,
@@ -226,8 +255,9 @@ class Renderer:
             "kdtree": self._buffers.tree.stats,
             **scene.report.as_stats(),
         }
-        if "adaptive" in image:
-            stats["adaptive"] = image["adaptive"]
+        for key in ("adaptive", "accumulated"):
+            if key in image:
+                stats[key] = image[key]
         if field_ is not None:
             stats["gi"] = {**field_.stats, "photons_reused": not the_plan.traces_photons,
                            "photons_reweighted": the_plan.reweights_photons,

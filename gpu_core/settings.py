@@ -61,9 +61,14 @@ class RenderSettings:
                                   "its noise, as Cycles measures it, is below this (lower: less noise, more time; "
                                   "0: every pixel takes every sample)", panel="sampling", minimum=0.0, maximum=1.0,
                                   soft_max=0.5, blender_default=0.01)
+    preview_noise_threshold: float = knob(0.0, "Viewport Noise Threshold", "The Rendered viewport's adaptive "
+                                          "sampling: a pixel sits the later passes out once its noise is below "
+                                          "this (0: every pixel takes every sample)", panel="sampling",
+                                          text="Viewport Noise", minimum=0.0, maximum=1.0, soft_max=0.5,
+                                          blender_default=0.01)
     min_samples: int = knob(0, "Min Samples", "Adaptive sampling: samples every pixel takes before its noise is "
-                            "judged (0: a quarter of Samples, at least 4)", panel="sampling", minimum=0,
-                            soft_max=1024)
+                            "judged (0: a quarter of Samples, or of Viewport Samples in the viewport, at least 4)",
+                            panel="sampling", minimum=0, soft_max=1024)
     seed: int = knob(0, "Seed", "Noise pattern", panel="sampling", minimum=0)
     clamp: float = knob(0.0, "Clamp", "Largest radiance of one sample (0 disables clamping)", panel="sampling",
                         minimum=0.0)

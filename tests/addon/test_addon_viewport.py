@@ -14,7 +14,8 @@ import pytest
 
 from blender_addon.display import DISPLAY_MAX, prepare_pixels
 from blender_addon.engine import GpuGiRenderEngine
-from blender_addon.viewport import BATCH_SECONDS, COARSE_FACTOR, Job, ViewportSession, pass_settings, passes, view_state
+from blender_addon.viewport import (BATCH_SECONDS, COARSE_FACTOR, OPEN_MIN_SAMPLES, Job, ViewportSession, pass_settings,
+                                   passes, view_state)
 from gpu_core.scene import FILTER_BLACKMAN_HARRIS, FILTER_BOX
 from gpu_core.errors import DeviceError, RenderCancelled
 from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Lights
@@ -157,9 +158,14 @@ def test_the_view_camera_takes_the_film_filter_and_a_filter_edit_changes_the_sig
 
 class FakeRenderer:
     """Records each render; ``block`` makes a render wait until it is asked
-    to stop. The image of the n-th render is n everywhere."""
+    to stop. The image of the n-th render is n everywhere; an accumulating
+    render reports its film holding every sample from 0 to its last, all
+    pixels taking them, settled from ``settle_at`` samples on."""
 
-    def __init__(self, block=False, error=None, linger=0.0):
+    def __init__(self, block=False, error=None, linger=0.0, settle_at=None):
+        self.settle_at = settle_at
+        self.accumulating: list[bool] = []
+        self.thresholds: list[float] = []
         self.calls: list[tuple[int, int, int]] = []
         self.linger = linger  # seconds a render takes to end, cancelled or not
         self.active = self.most_at_once = 0
@@ -171,8 +177,10 @@ class FakeRenderer:
         self.error = error
         self.started = threading.Event()
 
-    def render(self, scene, settings, progress=None, should_stop=None, edits=None, sample_start=0):
+    def render(self, scene, settings, progress=None, should_stop=None, edits=None, sample_start=0, accumulate=False):
         cam = scene.camera
+        self.accumulating.append(accumulate)
+        self.thresholds.append(settings.noise_threshold)
         self.calls.append((cam.width, cam.height, settings.samples))
         self.starts.append(sample_start)
         self.edits.append(edits)
@@ -197,7 +205,13 @@ class FakeRenderer:
             passes["Denoising Albedo"] = np.full((cam.height, cam.width, 3), 0.5, np.float32)
             passes["Denoising Normal"] = np.zeros((cam.height, cam.width, 3), np.float32)
             passes["Denoising Normal"][..., 2] = 1.0
-        return SimpleNamespace(passes=passes, stats={"triangles": 2}, warnings=[])
+        stats = {"triangles": 2}
+        if accumulate:
+            held = sample_start + settings.samples
+            settled = self.settle_at is not None and held >= self.settle_at
+            stats["accumulated"] = {"samples": held, "mean_samples": held / 2 if settled else held,
+                                    "converged": settled, "sample_start": 0}
+        return SimpleNamespace(passes=passes, stats=stats, warnings=[])
 
 
 def _job(width=64, height=32, samples=8, pixel_size=1, denoise=False, edits=None):
@@ -227,9 +241,10 @@ def test_worker_renders_coarse_then_accumulates_full_passes_up_to_the_viewport_s
     coarse = (64 // COARSE_FACTOR, 32 // COARSE_FACTOR, 1)
     assert renderer.calls == [coarse, (64, 32, 1), (64, 32, 2), (64, 32, 4), (64, 32, 1)]
     assert renderer.starts == [0, 0, 1, 3, 7]  # the full passes number their samples on from each other
+    assert renderer.accumulating == [False, True, True, True, True]  # each full pass continues the film
     image, version = session.latest()
-    # the sample-weighted mean of the full passes (the n-th render's image is n)
-    np.testing.assert_allclose(image, (1 * 2 + 2 * 3 + 4 * 4 + 1 * 5) / 8)
+    # the film after the last pass, as the renderer holds it (the n-th render's image is n)
+    np.testing.assert_allclose(image, 5.0)
     assert image.shape == (32, 64, 4) and version == 5 and len(redraws) == 5
     assert session.samples == 8 and session.status.endswith("sample 8/8, 2 triangles")
     assert session.error is None
@@ -247,11 +262,30 @@ def test_every_viewport_pass_launches_the_image_in_shorter_batches_than_f12():
     assert BATCH_SECONDS < RenderSettings().batch_seconds
 
 
-def test_viewport_passes_take_every_sample_whatever_the_noise_threshold():
-    # the accumulation weighs each pass by its samples, the same in every pixel
+def test_full_passes_judge_noise_by_the_viewport_threshold_after_a_quarter_of_the_viewport_samples():
     job = _job(samples=64)
-    job = dataclasses.replace(job, settings=dataclasses.replace(job.settings, noise_threshold=0.01))
-    assert all(pass_settings(job.settings, step).noise_threshold == 0.0 for step in passes(job))
+    job = dataclasses.replace(job, settings=dataclasses.replace(job.settings, noise_threshold=0.01,
+                                                                preview_noise_threshold=0.05))
+    steps = list(passes(job))
+    chosen = [pass_settings(job.settings, step) for step in steps]
+    assert [s.noise_threshold for s in chosen] == [0.0] + [0.05] * (len(steps) - 1)  # the coarse pass: none
+    assert {s.min_samples for s in chosen} == {16}
+    open_ended = dataclasses.replace(job, settings=dataclasses.replace(job.settings, samples=0))
+    assert pass_settings(open_ended.settings, steps[1]).min_samples == OPEN_MIN_SAMPLES
+    chosen_min = dataclasses.replace(job.settings, min_samples=6)
+    assert pass_settings(chosen_min, steps[1]).min_samples == 6
+
+
+@pytest.mark.parametrize("denoise", [False, True])
+def test_a_view_whose_pixels_have_all_settled_stops_before_its_samples_and_is_denoised_then(denoise):
+    renderer = FakeRenderer(settle_at=8)
+    session, _ = _session(renderer)
+    session.update_scene(_job(samples=64, denoise=denoise), signature=("view", 1))
+    _wait(session)
+    assert [samples for _, _, samples in renderer.calls] == [1, 1, 2, 4, 8]  # settled after the pass to 15
+    assert session.samples == 15
+    label = "sample 15/64 (7.5 per pixel), settled" + (", denoised" if denoise else "")
+    assert session.status.endswith(label + ", 2 triangles")
 
 
 @pytest.mark.parametrize("denoise", [False, True])
