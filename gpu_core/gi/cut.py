@@ -39,7 +39,11 @@ from ..device.layout import float4_rows
 DELTA = 0.2  # default refinement threshold, relative to E_p
 MAX_ROUNDS = 6  # default refinement rounds
 LEVELS = (12, 13)  # tree levels whose mean E~_p is E_min
-NEIGHBOURS = 6  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS; README)
+NEIGHBOURS = 4  # cut nodes considered around a lookup point (cut_lookup.h CUT_NEIGHBOURS; README)
+# nodes searched for the nearest one facing a lookup point's way when none of
+# its NEIGHBOURS nearest does (cut_lookup.h CUT_FALLBACK: a closed box whose
+# cut is one node per wall, all at one point)
+FALLBACK = 16
 # photons of a node that can join the coarse cut, at most (MNRT's ICUT_PHOTONLIMIT): on one flat
 # surface no node is mixed, and a node near the root, standing for the whole surface, flattened
 # its light (README, "Illumination cut")
@@ -57,13 +61,13 @@ _PROGRAM = "gi/cut.cl"
 def lookup_defines(k: int) -> dict:
     """Defines of a program that estimates with ``k`` photons and looks the
     cut up: the kNN capacity and the lookup's constants."""
-    return {"KNN_K": max(int(k), NEIGHBOURS), "KNN_VARIABLE_K": 1, "CUT_NEIGHBOURS": NEIGHBOURS,
-            "CUT_COHERENT": f"{COHERENT!r}f"}
+    return {"KNN_K": max(int(k), FALLBACK), "KNN_VARIABLE_K": 1, "CUT_NEIGHBOURS": NEIGHBOURS,
+            "CUT_FALLBACK": FALLBACK, "CUT_COHERENT": f"{COHERENT!r}f"}
 
 
 def image_lookup_defines() -> dict:
     """Defines of a program that only looks the cut up (the image kernel's
-    glossy paths): a kNN of CUT_NEIGHBOURS."""
+    glossy paths): a kNN of CUT_NEIGHBOURS, CUT_FALLBACK where none faces."""
     return lookup_defines(NEIGHBOURS)
 
 
