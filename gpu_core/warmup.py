@@ -137,7 +137,7 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
     if points.count and "caustics" in the_plan.stages:
         pos, nrm = points.positions, points.normals
         stand_in = PointTree.build(device, pos, np.full_like(pos, 1e-3), nrm, nrm, k_hint=settings.photon_k)
-        cut.caustic_irradiance(stand_in, points.pos, points.nrm, points.count, settings.photon_k,
+        cut.caustic_irradiance(stand_in, points.pos, points.nrm, points.count, settings.caustic_k,
                                device.empty(16 * points.count))
 
 

@@ -108,7 +108,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
         say("caustics")
         with timer.stage("caustics"):
             estimate = device.empty(16 * n)
-            cut.caustic_irradiance(maps.caustic_map, points.pos, points.nrm, n, settings.photon_k, estimate)
+            cut.caustic_irradiance(maps.caustic_map, points.pos, points.nrm, n, settings.caustic_k, estimate)
             caustic = points.scatter(estimate)
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
     # glossy paths read the diffuse light where they land from the cut
@@ -217,5 +217,5 @@ def programs(device: Device, settings: RenderSettings, stages: list[str], scene_
         wanted += gather.programs(device, scene_defines) + neighbours.programs()
         wanted += interpolation.programs()
     if "caustics" in stages:
-        wanted += query_programs(settings.photon_k)
+        wanted += query_programs(settings.caustic_k)
     return wanted

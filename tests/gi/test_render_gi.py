@@ -7,12 +7,13 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scenes_py import box_scene, on_device
+from scenes_py import box_scene, camera_looking_down, on_device, plane_scene, quad
 
 from gpu_core.device.layout import float4_rows
 from gpu_core.gi import cut, gather, shading_points
 from gpu_core.gi.cache import neighbours
 from gpu_core.renderer import Renderer
+from gpu_core.scene import LIGHT_AREA, Lights
 from gpu_core.settings import RenderSettings
 
 # small and quick: a few thousand photons and cache points at 24 x 24 pixels
@@ -108,6 +109,31 @@ def test_light_seen_through_a_mirror_reaches_the_image(device):
     gi = rgb(Renderer(device).render(scene, GI))
     reference = rgb(Renderer(device).render(scene, RenderSettings(samples=256, diffuse_bounces=32)))
     assert abs(gi.mean() / reference.mean() - 1.0) < 0.06
+
+
+def test_caustic_k_sets_the_photons_of_each_estimate_of_the_caustics_seen_directly(device):
+    """An area light facing up under a mirror ceiling: the floor sees it only
+    through the mirror, all of it the caustic map's. Its mirror image, a
+    light facing down as far above, lights a bare floor directly; times the
+    mirror's reflectance that is the same irradiance. Fewer photons per
+    estimate: the same light, noisier; the cache is not touched."""
+    height, light_z, reflectance = 1.5, 1.0, 0.8
+    camera = camera_looking_down(height=0.9, half_width=0.5, size=16)
+    area = dict(kind=LIGHT_AREA, power=(150.0,) * 3, axis_u=(1.0, 0, 0), axis_v=(0, 1.0, 0))
+    up = Lights.make([dict(area, position=(0, 0, light_z), direction=(0, 0, 1.0))])
+    mirror = dict(base_color=(reflectance,) * 3, metallic=1.0, roughness=0.0)
+    scene = plane_scene(up, camera, extra_tris=[quad((0, 0, height), 40.0, flip=True)], extra_materials=[mirror])
+    image = Lights.make([dict(area, position=(0, 0, 2 * height - light_z), direction=(0, 0, -1.0))])
+    direct = Renderer(device).render(plane_scene(image, camera), RenderSettings(samples=16)).passes["Combined"]
+    expected = reflectance * direct[..., :3].mean()
+    settings = dataclasses.replace(GI, global_photons=20_000, cache_seeds=80, gather_rays=16, light_passes=True)
+    few, many = (Renderer(device).render(scene, dataclasses.replace(settings, caustic_k=k)).passes for k in (4, 64))
+    for passes in (few, many):
+        assert passes["Caustics"].mean() == pytest.approx(expected, rel=0.1)
+    spread = [passes["Caustics"].std() / passes["Caustics"].mean() for passes in (few, many)]
+    assert spread[0] > 2.0 * spread[1]
+    np.testing.assert_allclose(few["Diffuse Indirect"] - few["Caustics"], many["Diffuse Indirect"] - many["Caustics"],
+                               rtol=1e-5, atol=1e-6)
 
 
 def test_plan_names_the_gi_stages_and_skips_the_caustic_map_without_mirrors(device):
