@@ -59,6 +59,7 @@ SWEEPS = {  # knob -> values, each applied on top of the Preview preset
     "cache_seeds": (250, 1000, 4000),
     "gather_rays": (64, 256, 1024),
     "photon_k": (20, 50, 100),
+    "caustic_k": (8, 32, 64),
     "gi_subpixels": (1, 2),
     "noise_threshold": (0.0, 0.005, 0.02),
 }

@@ -40,10 +40,9 @@ _PHOTON_PARTS = ("geometry", "materials", "lights", "world")
 _PHOTON_PATH_KEY = len(_PHOTON_KNOBS) + 2  # the photon key's knobs, geometry and materials
 # settings the GI cache reads beyond the photon maps': a change runs its stages again
 _CACHE_KNOBS = ("gi_subpixels", "cache_seeds", "cache_alpha", "cut_delta", "gather_rays", "caustic_k")
-# cache knobs outside the records key's shared part: the grid (records are in world space), the
-# number of cache points (ordered: a view reads records gathered from at least as many) and the
-# caustic estimate at the shading points (records hold none)
-_RECORDS_OWN = ("gi_subpixels", "cache_seeds", "caustic_k")
+# cache knobs outside the records key's shared part: the grid (records are in world space) and
+# the number of cache points (ordered: a view reads records gathered from at least as many)
+_RECORDS_OWN = ("gi_subpixels", "cache_seeds")
 
 
 @dataclass

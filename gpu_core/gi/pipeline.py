@@ -200,12 +200,12 @@ def _merged(device: Device, kept: CacheRecords | None, new: CacheRecords | None)
 def _cut(device: Device, maps: PhotonMaps, settings: RenderSettings) -> tuple:
     """The illumination cut of the global map, the cut gathering reads
     (caustic light added), and whether they were kept: a function of the
-    maps and two settings, computed once per photon maps for every view."""
-    key = ("cut", settings.photon_k, settings.cut_delta)
+    maps and three settings, computed once per photon maps for every view."""
+    key = ("cut", settings.photon_k, settings.caustic_k, settings.cut_delta)
     reused = key in maps.derived
     if not reused:
         the_cut = cut.select(device, maps.global_map, settings.photon_k, delta=settings.cut_delta)
-        maps.derived[key] = (the_cut, cut.with_caustics(the_cut, maps.caustic_map, settings.photon_k))
+        maps.derived[key] = (the_cut, cut.with_caustics(the_cut, maps.caustic_map, settings.caustic_k))
     return (*maps.derived[key], reused)
 
 
@@ -217,5 +217,5 @@ def programs(device: Device, settings: RenderSettings, stages: list[str], scene_
         wanted += gather.programs(device, scene_defines) + neighbours.programs()
         wanted += interpolation.programs()
     if "caustics" in stages:
-        wanted += query_programs(settings.caustic_k)
+        wanted += query_programs(settings.caustic_k)  # the caustic map's estimates, seen directly and in the cut
     return wanted

@@ -104,7 +104,8 @@ def test_an_accumulating_pass_that_does_not_follow_the_film_starts_a_new_one(dev
                                   Renderer(device).render(the_scene, one, sample_start=5).passes["Combined"])
     # another view: a new film, even where the numbers follow on
     x0, x1, y0, y1 = the_scene.camera.window
-    turned = dataclasses.replace(the_scene, camera=dataclasses.replace(the_scene.camera, window=(x0 + 0.1, x1 + 0.1, y0, y1)))
+    turned = dataclasses.replace(the_scene, camera=dataclasses.replace(the_scene.camera,
+                                                                       window=(x0 + 0.1, x1 + 0.1, y0, y1)))
     moved = renderer.render(turned, one, sample_start=6, accumulate=True)
     assert moved.stats["accumulated"]["sample_start"] == 6 and moved.stats["accumulated"]["samples"] == 1
     # a new accumulation from 0 never continues the last one

@@ -4,6 +4,7 @@ it helps computes what it computes without it."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import subprocess
@@ -16,6 +17,7 @@ from conftest import ROOT
 from test_threads import GI, scene
 
 from gpu_core import warmup
+from gpu_core.device import Device
 from gpu_core.device import programs as programs_module
 from gpu_core.errors import DeviceError
 from gpu_core.plan import plan
@@ -135,3 +137,14 @@ def test_the_helper_module_renders_a_pickled_small_copy(device):
     done = subprocess.run([sys.executable, "-m", "gpu_core.warmup", spec], input=pickle.dumps(small),
                           env=dict(os.environ, PYTHONPATH=path), capture_output=True, timeout=600)
     assert done.returncode == 0, done.stderr.decode()[-2000:]
+
+
+def test_a_gi_render_builds_no_program_its_plan_does_not_list(device):
+    # every program a render needs is built before its first stage: none is left to a stage to build
+    the_scene = validate(scene(True, 24))  # a mirror: caustics seen directly and in the cut's nodes
+    settings = dataclasses.replace(GI, caustic_k=GI.photon_k + 4)  # the two caustic estimates' k differ
+    fresh = Device(context=device.context, queue=device.queue, device=device.device)
+    fresh.programs.build_all(plan(the_scene, settings, None, None, fresh).programs)
+    listed = len(fresh.builds)
+    Renderer(fresh).render(the_scene, settings)
+    assert [r.name for r in fresh.builds[listed:]] == []
