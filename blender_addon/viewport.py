@@ -143,11 +143,12 @@ def pass_settings(settings, step: Pass):
     the launch it comes during. A full pass judges noise against the
     Viewport Noise Threshold once every pixel has the minimum samples (Min
     Samples, else a quarter of Viewport Samples, at least 4); a coarse
-    pass takes every sample."""
+    pass takes every sample. No pass reads back Depth and Normal: the
+    viewport shows Combined."""
     target = int(settings.samples)
     minimum = settings.min_samples or (max(4, target // 4) if target > 0 else OPEN_MIN_SAMPLES)
     settings = dataclasses.replace(settings, samples=step.samples, denoise=False, batch_seconds=BATCH_SECONDS,
-                                   denoising_passes=bool(settings.denoise) and not step.coarse,
+                                   geometry_passes=False, denoising_passes=bool(settings.denoise) and not step.coarse,
                                    noise_threshold=0.0 if step.coarse else settings.preview_noise_threshold,
                                    min_samples=minimum)
     if step.coarse:

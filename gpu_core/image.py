@@ -283,13 +283,16 @@ def _read_passes(device: Device, settings: RenderSettings, w: int, h: int, film:
     def rgb(buf) -> np.ndarray:
         return np.ascontiguousarray(device.read(buf, (h, w, 4), np.float32)[..., :3])
 
-    passes = {"Combined": device.read(film.combined, (h, w, 4), np.float32),
-              "Depth": device.read(film.depth, (h, w, 1), np.float32), "Normal": rgb(film.normal)}
+    passes = {"Combined": device.read(film.combined, (h, w, 4), np.float32)}
+    if settings.geometry_passes or settings.denoising_passes:
+        passes["Depth"] = device.read(film.depth, (h, w, 1), np.float32)
+    if settings.geometry_passes:
+        passes["Normal"] = rgb(film.normal)
     if settings.light_passes:
         layers = device.read(film.light, (len(LIGHT_PASSES), h, w, 4), np.float32)
         passes.update((name, np.ascontiguousarray(layers[i, ..., :3])) for i, name in enumerate(LIGHT_PASSES))
     if settings.denoising_passes:
         passes["Denoising Albedo"] = rgb(film.albedo)
         passes["Denoising Normal"] = rgb(film.feature_normal)
-        passes["Denoising Depth"] = passes["Depth"].copy()
+        passes["Denoising Depth"] = passes["Depth"].copy() if settings.geometry_passes else passes.pop("Depth")
     return passes

@@ -119,6 +119,7 @@ class RenderSettings:
     transparent_background: bool = internal(False)  # film alpha 0 where the world is seen
     batch_pixels: int = internal(16384)  # most pixels per kernel launch (bounds cancel latency)
     batch_seconds: float = internal(0.1)  # aimed duration of one image launch: what a stop or an edit waits for
+    geometry_passes: bool = internal(True)  # return Depth and Normal (the viewport shows Combined alone)
     light_passes: bool = internal(False)  # also return the light passes (image.LIGHT_PASSES)
     denoising_passes: bool = internal(False)  # also return Denoising Albedo, Normal and Depth
     # the share of the photon counts a render traces when it cannot use the

@@ -274,6 +274,7 @@ def test_full_passes_judge_noise_by_the_viewport_threshold_after_a_quarter_of_th
     assert pass_settings(open_ended.settings, steps[1]).min_samples == OPEN_MIN_SAMPLES
     chosen_min = dataclasses.replace(job.settings, min_samples=6)
     assert pass_settings(chosen_min, steps[1]).min_samples == 6
+    assert not any(s.geometry_passes for s in chosen)  # the viewport shows Combined: no Depth or Normal read back
 
 
 @pytest.mark.parametrize("denoise", [False, True])

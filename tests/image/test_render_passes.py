@@ -140,3 +140,16 @@ def test_plan_lists_the_passes_asked_for(device):
     both = Renderer(device).render(scene, RenderSettings(samples=1, light_passes=True, denoising_passes=True))
     assert not {"light_passes", "denoising_passes"} & set(plain)
     assert both.stats["plan"] == plain + ["light_passes", "denoising_passes"]
+
+
+def test_without_geometry_passes_only_combined_and_the_asked_denoising_passes_come_back(device):
+    lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 2.0), power=(100.0,) * 3)])
+    scene = plane_scene(lights, camera_looking_down(size=8))
+    full = Renderer(device).render(scene, RenderSettings(samples=2, denoising_passes=True)).passes
+    lean = Renderer(device).render(scene, RenderSettings(samples=2, geometry_passes=False)).passes
+    assert set(lean) == {"Combined"}
+    np.testing.assert_array_equal(lean["Combined"], full["Combined"])
+    guided = Renderer(device).render(scene, RenderSettings(samples=2, geometry_passes=False,
+                                                           denoising_passes=True)).passes
+    assert set(guided) == {"Combined", *DENOISING_PASSES}
+    np.testing.assert_array_equal(guided["Denoising Depth"], full["Depth"])
