@@ -39,7 +39,8 @@ _PHOTON_KNOBS = ("global_photons", "caustic_photons", "seed", "photon_k", "max_b
 _PHOTON_PARTS = ("geometry", "materials", "lights", "world")
 _PHOTON_PATH_KEY = len(_PHOTON_KNOBS) + 2  # the photon key's knobs, geometry and materials
 # settings the GI cache reads beyond the photon maps': a change runs its stages again
-_CACHE_KNOBS = ("gi_subpixels", "cache_seeds", "cache_alpha", "cut_delta", "gather_rays", "caustic_k")
+_CACHE_KNOBS = ("gi_subpixels", "cache_seeds", "cache_alpha", "cache_iterations", "cut_delta", "gather_rays",
+                "caustic_k")
 # cache knobs outside the records key's shared part: the grid (records are in world space) and
 # the number of cache points (ordered: a view reads records gathered from at least as many)
 _RECORDS_OWN = ("gi_subpixels", "cache_seeds")

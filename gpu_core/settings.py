@@ -97,6 +97,11 @@ class RenderSettings:
                           panel="gi", text="Caustic Photons per Estimate", minimum=1, maximum=1024, soft_max=200)
     cache_seeds: int = knob(1600, "Cache Points", "Irradiance-cache sample points (k-means seeds)" + _GI_ONLY,
                             panel="gi", minimum=1, soft_max=20_000)
+    cache_iterations: int = knob(4, "Cache Iterations", "k-means iterations that move the cache points towards "
+                                 "the middle of the shading points they stand for before gathering (an edit that "
+                                 "moves them starts from the last ones and takes at most 2): more, the points "
+                                 "spread more evenly; fewer, sooner" + _GI_ONLY, panel="gi", minimum=1,
+                                 maximum=64, soft_max=16)
     gather_rays: int = knob(256, "Gather Rays", "Final-gather rays per cache point" + _GI_ONLY, panel="gi",
                             minimum=1, soft_max=2048)
     gi_subpixels: int = knob(1, "GI Points per Pixel Side", "Shading points per pixel side at which indirect "
@@ -171,17 +176,18 @@ def knobs() -> list:
 # as a ground truth should (README, "Adaptive sampling").
 PRESETS: dict[str, dict] = {
     "draft": dict(samples=4, max_bounces=4, diffuse_bounces=1, global_photons=50_000, caustic_photons=20_000,
-                  photon_k=20, caustic_k=12, cache_seeds=400, gather_rays=64, gi_subpixels=1, cut_delta=2.0,
-                  cache_alpha=0.6, noise_threshold=0.0, min_samples=0),
+                  photon_k=20, caustic_k=12, cache_seeds=400, cache_iterations=4, gather_rays=64, gi_subpixels=1,
+                  cut_delta=2.0, cache_alpha=0.6, noise_threshold=0.0, min_samples=0),
     "preview": dict(samples=16, max_bounces=8, diffuse_bounces=2, global_photons=100_000, caustic_photons=50_000,
-                    photon_k=32, caustic_k=16, cache_seeds=1000, gather_rays=128, gi_subpixels=1, cut_delta=1.5,
-                    cache_alpha=0.6, noise_threshold=0.01, min_samples=0),
+                    photon_k=32, caustic_k=16, cache_seeds=1000, cache_iterations=4, gather_rays=128,
+                    gi_subpixels=1, cut_delta=1.5, cache_alpha=0.6, noise_threshold=0.01, min_samples=0),
     "final": dict(samples=64, max_bounces=8, diffuse_bounces=4, global_photons=250_000, caustic_photons=100_000,
-                  photon_k=50, caustic_k=16, cache_seeds=1600, gather_rays=256, gi_subpixels=1, cut_delta=1.0,
-                  cache_alpha=0.6, noise_threshold=0.005, min_samples=0),
+                  photon_k=50, caustic_k=16, cache_seeds=1600, cache_iterations=4, gather_rays=256, gi_subpixels=1,
+                  cut_delta=1.0, cache_alpha=0.6, noise_threshold=0.005, min_samples=0),
     "reference": dict(samples=1024, max_bounces=16, diffuse_bounces=16, global_photons=1_000_000,
-                      caustic_photons=500_000, photon_k=100, caustic_k=32, cache_seeds=5000, gather_rays=512,
-                      gi_subpixels=2, cut_delta=0.5, cache_alpha=0.6, noise_threshold=0.0, min_samples=0),
+                      caustic_photons=500_000, photon_k=100, caustic_k=32, cache_seeds=5000, cache_iterations=4,
+                      gather_rays=512, gi_subpixels=2, cut_delta=0.5, cache_alpha=0.6, noise_threshold=0.0,
+                      min_samples=0),
 }
 
 

@@ -146,9 +146,12 @@ def _cached_irradiance(device: Device, buffers: SceneBuffers, points, settings: 
             args = (device, todo.pos, todo.nrm, todo.pixel, todo.count, todo.width, todo.height, min(seeds, todo.count))
             if index is None:
                 chosen, samples_reused = held_samples.select(*args, settings.cache_alpha, settings.seed,
-                                                             warm=settings.cache_reuse)
+                                                             warm=settings.cache_reuse,
+                                                             max_iterations=settings.cache_iterations)
             else:  # the points the records leave uncovered: a new subset each view, not held
-                chosen, samples_reused = samples.select(*args, settings.cache_alpha, seed=settings.seed), False
+                chosen = samples.select(*args, settings.cache_alpha, max_iterations=settings.cache_iterations,
+                                        seed=settings.seed)
+                samples_reused = False
         check_stop(should_stop)
         with timer.stage("cut"):
             the_cut, gather_cut, cut_reused = _cut(device, maps, settings)

@@ -134,6 +134,14 @@ def test_caustic_k_sets_the_photons_of_each_estimate_of_the_caustics_seen_direct
     assert spread[0] > 2.0 * spread[1]
 
 
+def test_cache_iterations_cap_the_k_means_and_a_change_chooses_the_cache_points_again(device):
+    renderer, scene = Renderer(device), box_scene(albedo=0.5)
+    one = renderer.render(scene, dataclasses.replace(GI, cache_iterations=1)).stats["gi"]
+    assert one["selection"]["iterations"] == 1
+    three = renderer.render(scene, dataclasses.replace(GI, cache_iterations=3)).stats["gi"]
+    assert not three["cache_reused"] and 1 < three["selection"]["iterations"] <= 3
+
+
 def test_plan_names_the_gi_stages_and_skips_the_caustic_map_without_mirrors(device):
     result = Renderer(device).render(box_scene(), GI)
     plan = result.stats["plan"]

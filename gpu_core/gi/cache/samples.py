@@ -32,7 +32,7 @@ def programs() -> list[tuple[str, dict]]:
 
 
 ALPHA0 = 0.6  # default alpha times the largest side of the shading points' box
-MAX_ITERATIONS = 4  # default cap on k-means iterations (gains flatten out after 3-4)
+MAX_ITERATIONS = 4  # default cap on k-means iterations (the Cache Iterations setting's default)
 CONVERGE_FRACTION = 0.01  # k-means stops once at most this fraction of points changed cluster
 WARM_ITERATIONS = 2  # k-means iterations from an earlier render's samples (their centres have settled)
 
@@ -158,10 +158,11 @@ class HeldSamples:
         self._held: list[tuple[tuple, int, tuple, SampleSet]] = []
 
     def select(self, device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: int, width: int,
-               height: int, count: int, alpha: float, seed: int, warm: bool = False) -> tuple[SampleSet, bool]:
+               height: int, count: int, alpha: float, seed: int, warm: bool = False,
+               max_iterations: int = MAX_ITERATIONS) -> tuple[SampleSet, bool]:
         """``select``'s samples for these points, and whether they are an
         earlier render's (the points compared on the device)."""
-        key = (device, width, height, count, alpha, seed, MAX_ITERATIONS, CONVERGE_FRACTION)
+        key = (device, width, height, count, alpha, seed, max_iterations, CONVERGE_FRACTION)
         start = None
         for entry in self._held:
             held_key, held_n, (held_pos, held_nrm, held_pixels), chosen = entry
@@ -174,7 +175,8 @@ class HeldSamples:
                 return chosen, True
             # a start with fewer samples than asked (clusters lost to ties) would thin out edit after edit
             start = chosen if warm and chosen.count == count <= n else start
-        chosen = select(device, pos, nrm, pixels, n, width, height, count, alpha=alpha, seed=seed, start=start)
+        chosen = select(device, pos, nrm, pixels, n, width, height, count, alpha=alpha, max_iterations=max_iterations,
+                        seed=seed, start=start)
         self._held = [entry for entry in self._held if entry[0] != key][-(self.KEEP - 1):]
         self._held.append((key, n, (pos, nrm, pixels), chosen))
         return chosen, False
