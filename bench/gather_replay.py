@@ -1,5 +1,4 @@
-"""One final-gather launch, saved on one OpenCL device and replayed alone on
-any: where GI frames fail on one driver and not on another (README, "On an
+"""One final gather, saved on one OpenCL device and replayed alone on any: where GI frames fail on one driver and not on another (README, "On an
 NVIDIA H100, a third round"), the same inputs run on both.
 
     python bench/gather_replay.py save [--device NVIDIA] [--seconds 120] [--watchdog 30]
@@ -10,19 +9,19 @@ NVIDIA H100, a third round"), the same inputs run on both.
 ``save`` renders the snapshots of ``bench/frame_snapshot.py save`` (box
 with torus and Cornell box at Draft and Final, 64² and 256², a new seed
 each frame) on --device until --seconds have passed, and before every
-launch of ``Gather_samples`` writes what it is given (each buffer read back
-whole, each scalar, the program's defines) to ``.cache/gather_launch.pkl``:
-when a launch faults, the file holds it; when one does not end, the
+gather (``gpu_core.gi.gather.gather_range``: its three kernels and the sort
+between them) writes what it is given (each buffer read back whole, each
+scalar, the program's defines) to ``.cache/gather_launch.pkl``: when a
+kernel of it faults, the file holds it; when one does not end, the
 watchdog ends the process after --watchdog seconds with every thread's
 stack, and the file holds it too. Without a failure the file is removed.
 
-``run`` launches a saved gather alone on --device, over all its samples or
+``run`` runs a saved gather alone on --device, over all its samples or
 ``--samples FIRST END``, with its own bounce limit or ``--max-specular``,
 and prints its time and each output's sums; ``--out`` keeps each sample's
 irradiance, harmonic hit distance and hit count. ``compare`` prints where
-two such files differ. The argument order is ``Gather_samples``' in
-``gpu_core/gi/gather.cl`` (a test replays a saved launch against the
-render it came from).
+two such files differ. (A test replays a saved gather against the render
+it came from.)
 """
 
 from __future__ import annotations
@@ -33,7 +32,7 @@ import os
 import pickle
 import sys
 import time
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import numpy as np
 import pyopencl as cl
@@ -43,62 +42,56 @@ sys.path.insert(0, ROOT)
 
 from gpu_core.device import get_device  # noqa: E402
 from gpu_core.device.device import Device  # noqa: E402
-from gpu_core.device.kernels import Kernel  # noqa: E402
+
+from gpu_core.gi import gather  # noqa: E402
 
 LAUNCH = os.path.join(ROOT, ".cache", "gather_launch.pkl")
 SNAPSHOTS = os.path.join(ROOT, ".cache", "snapshots")
-KERNEL = "Gather_samples"
 JOBS = [("box_torus", "draft", 64), ("box_torus", "draft", 256), ("cornell_box", "final", 256),
         ("box_torus", "final", 128), ("cornell_box", "draft", 64)]
-# positions from the end of Gather_samples' arguments
-FIRST, END, MAX_SPECULAR, IRRADIANCE, DISTANCE, HITS = -10, -9, -7, -4, -3, -2
 
 
 # ---- save ----------------------------------------------------------------------------------
 
 
+def _host(device: Device, arg):
+    """A kernel argument as it can be saved: a buffer's bytes, else itself."""
+    if isinstance(arg, cl.MemoryObjectHolder):
+        host = np.empty(arg.get_info(cl.mem_info.SIZE), np.uint8)
+        cl.enqueue_copy(device.queue, host, arg)
+        return ("buffer", host)
+    return arg
+
+
 class LaunchRecorder:
-    """While active, every launch of Gather_samples first writes its inputs
-    to ``path`` (the queue finished before they are read back)."""
+    """While active, every gather (gather.gather_range) first writes its
+    inputs to ``path`` (the queue finished before they are read back)."""
 
     def __init__(self, path: str):
         self.path = path
-        self._programs = {}
 
     def __enter__(self):
-        self._kernel, self._enqueue = Device.kernel, Kernel._enqueue
+        self._gather_range = gather.gather_range
         recorder = self
 
-        def kernel(device, program, name, defines=None):
-            made = recorder._kernel(device, program, name, defines)
-            if name == KERNEL:
-                recorder._programs[id(made)] = (program, dict(defines or {}))
-            return made
+        def gather_range(device, job, first, end, out, should_stop=None):
+            recorder.write(device, job, first, end, out.count)
+            return recorder._gather_range(device, job, first, end, out, should_stop)
 
-        def enqueue(launched, global_size, group, args):
-            if launched.name == KERNEL:
-                recorder.write(launched, group, args)
-            return recorder._enqueue(launched, global_size, group, args)
-
-        Device.kernel, Kernel._enqueue = kernel, enqueue
+        gather.gather_range = gather_range
         return self
 
     def __exit__(self, *exc):
-        Device.kernel, Kernel._enqueue = self._kernel, self._enqueue
+        gather.gather_range = self._gather_range
 
-    def write(self, launched: Kernel, group: int, args) -> None:
-        launched.queue.finish()
-        saved = []
-        for arg in args:
-            if isinstance(arg, cl.MemoryObjectHolder):
-                host = np.empty(arg.get_info(cl.mem_info.SIZE), np.uint8)
-                cl.enqueue_copy(launched.queue, host, arg)
-                saved.append(("buffer", host))
-            else:
-                saved.append(arg)
-        program, defines = self._programs[id(launched)]
+    def write(self, device: Device, job: gather.GatherJob, first: int, end: int, m: int) -> None:
+        device.queue.finish()
+        saved = {f.name: getattr(job, f.name) for f in fields(job)}
+        saved.update(scene_args=[_host(device, a) for a in job.scene_args],
+                     cut_args=[_host(device, a) for a in job.cut_args], positions=_host(device, job.positions),
+                     normals=_host(device, job.normals))
         with open(self.path, "wb") as f:
-            pickle.dump(dict(program=program, defines=defines, group=group, args=saved), f)
+            pickle.dump(dict(job=saved, first=first, end=end, samples=m), f)
 
 
 def save(device_spec: str | None, seconds: float, watchdog: float) -> None:
@@ -133,26 +126,31 @@ def save(device_spec: str | None, seconds: float, watchdog: float) -> None:
 
 def replay(device, launch: dict, first: int | None = None, end: int | None = None,
            max_specular: int | None = None) -> dict:
-    """Launch a saved gather alone: each sample's outputs (first .. end)."""
+    """Run a saved gather alone: each sample's outputs (first .. end)."""
     flags = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
-    args = [cl.Buffer(device.context, flags, hostbuf=a[1]) if isinstance(a, tuple) else a for a in launch["args"]]
-    first = int(args[FIRST]) if first is None else first
-    end = int(args[END]) if end is None else end
-    args[FIRST], args[END] = np.int32(first), np.int32(end)
+
+    def on_device(arg):
+        return cl.Buffer(device.context, flags, hostbuf=arg[1]) if isinstance(arg, tuple) else arg
+
+    saved = launch["job"]
+    job = gather.GatherJob(**{**saved, "scene_args": [on_device(a) for a in saved["scene_args"]],
+                              "cut_args": [on_device(a) for a in saved["cut_args"]],
+                              "positions": on_device(saved["positions"]), "normals": on_device(saved["normals"])})
     if max_specular is not None:
-        args[MAX_SPECULAR] = np.int32(max_specular)
-    kernel = device.kernel(launch["program"], KERNEL, launch["defines"])
+        job.max_specular = int(max_specular)
+    first = launch["first"] if first is None else first
+    end = launch["end"] if end is None else end
+    m = launch["samples"]
+    out = gather.GatherResult(device, device.empty(16 * m), device.empty(4 * m), device.empty(4 * m),
+                              device.empty(48 * m), m)
+    gather.gather_range(device, job, first, min(first + 1, end), out)  # builds the programs, untimed
+    device.queue.finish()
     began = time.perf_counter()
-    kernel.groups(end - first, launch["group"], *args)
+    gather.gather_range(device, job, first, end, out)
     device.queue.finish()
     seconds = time.perf_counter() - began
-    out = {}
-    for key, at, dtype, width in (("irradiance", IRRADIANCE, np.float32, 4), ("distance", DISTANCE, np.float32, 1),
-                                  ("hits", HITS, np.int32, 1)):
-        host = np.empty(end * width, dtype)
-        cl.enqueue_copy(device.queue, host, args[at])
-        out[key] = host.reshape(end, width)[first:, :3] if width > 1 else host[first:]
-    return dict(first=first, end=end, seconds=seconds, **out)
+    return dict(first=first, end=end, seconds=seconds, irradiance=out.irradiance[first:end],
+                distance=out.harmonic_distance[first:end], hits=device.read(out.hits, m, np.int32)[first:end])
 
 
 def run(path: str, device_spec: str | None, samples, max_specular: int | None, out: str | None) -> None:
@@ -161,7 +159,7 @@ def run(path: str, device_spec: str | None, samples, max_specular: int | None, o
         launch = pickle.load(f)
     first, end = samples if samples else (None, None)
     result = replay(device, launch, first, end, max_specular)
-    rays = int(launch["args"][FIRST + 2]) ** 2
+    rays = launch["job"]["strata"] ** 2
     print(f"{device.name}: samples {result['first']}..{result['end']} in {result['seconds'] * 1e3:.1f} ms; "
           f"irradiance finite {bool(np.isfinite(result['irradiance']).all())}, sum "
           f"{float(result['irradiance'].sum()):.6g}; rays reaching a diffuse surface "

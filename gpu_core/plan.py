@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 from .errors import BudgetError
 from .gi import cut as gi_cut
+from .gi import gather as gi_gather
 from .gi import pipeline as gi_pipeline
 from .image import film_bytes
 from .image import programs as image_programs
@@ -310,6 +311,8 @@ def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tup
         if the_plan.photon_maps.get("caustic", "").startswith("built"):
             stored += settings.caustic_photons
         need += stored * _STORED_PHOTON_BYTES + slots * _GRID_SLOT_BYTES
+        if "final_gather" in the_plan.stages:
+            need += gi_gather.batch_bytes(settings.cache_seeds, gi_pipeline.strata(settings.gather_rays))
         largest = max(largest, photon_trace.STORE_GUESS * settings.global_photons * 16, slots * 16)
     return int(need), int(largest)
 

@@ -8,10 +8,14 @@
  * reaching the point from them through mirrors, glass and near-specular
  * glossy surfaces comes from the caustic map.
  *
- * One work-group of GATHER_GROUP work-items per sample point: its rays are
- * spread over the group and reduced in local memory to the sample's
+ * One work-item per ray (Gather_rays), the cut's lookups for the rays'
+ * first diffuse hits made after all rays of a batch are traced, sorted
+ * along a Morton curve of their points (Gather_lookup: in ray order each
+ * kNN search starts cold; in space order neighbouring searches share their
+ * path through the tree, half the time on the CPU device), then one
+ * work-item per sample point (Gather_reduce) sums its rays to its
  * irradiance (with cosine sampling, the mean of albedo(y) E(y)), the
- * harmonic mean distance of its hits, and its hit count. */
+ * harmonic mean distance of its hits, its hit count and its gradient. */
 #include "device/launch.h"
 #include "device/rng.h"
 #include "device/sampling.h"
@@ -31,6 +35,14 @@ inline float3 Gather_lights_seen(const SceneView *sc, float3 org, float3 dir, fl
     return escaped ? sum + sc->world.xyz : sum;
 }
 
+/* A ray's first lookup of the cut, made after all rays are traced (in
+ * space order, Gather_lookup): the surface point, its shading normal and
+ * the weight of its light (w = 1 where there is one, 0 where none). */
+typedef struct {
+    float3 p, n;
+    float4 weight;
+} GatherLookup;
+
 /* Ray r of sample s (at p, normal n): the radiance arriving along it (times
  * pi: albedo(y) E(y) at each surface y with a diffuse lobe, through the
  * glossy and singular lobes it meets), the distance of its first hit where
@@ -38,9 +50,11 @@ inline float3 Gather_lights_seen(const SceneView *sc, float3 org, float3 dir, fl
  * of any surface (INFINITY where none). The rays split the unit square into
  * strata x strata cells, one jittered point each: cell (j, k) = (r % strata,
  * r / strata) is the ring sin^2 theta in [j, j + 1) / strata of the polar
- * angle and the sector phi in 2 pi [k, k + 1) / strata. */
+ * angle and the sector phi in 2 pi [k, k + 1) / strata. The light of the
+ * first diffuse hit is not in the radiance returned: its lookup is left in
+ * *deferred (the cut's lookups of later hits are made here). */
 inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, float3 p, float3 n, int s, int r,
-                         int strata, uint seed, float *distance, float *first_hit) {
+                         int strata, uint seed, float *distance, float *first_hit, GatherLookup *deferred) {
     float3 sum = (float3)(0.0f);
     *distance = -1.0f;
     *first_hit = INFINITY;
@@ -66,7 +80,14 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
         if (f.diffuse.x > 0.0f || f.diffuse.y > 0.0f || f.diffuse.z > 0.0f) {
             /* a diffuse lobe: its light from the cut */
             *distance = first_t;
-            sum += throughput * f.diffuse * m.base_color.w * CutLookup_light(cut, sp.p, sp.ns);
+            float3 weight = throughput * f.diffuse * m.base_color.w;
+            if (deferred->weight.w == 0.0f) {
+                deferred->p = sp.p;
+                deferred->n = sp.ns;
+                deferred->weight = (float4)(weight, 1.0f);
+            } else {
+                sum += weight * CutLookup_light(cut, sp.p, sp.ns);
+            }
         }
         /* the other lobes carry the ray on */
         float3 wi, weight;
@@ -94,100 +115,133 @@ inline float3 Gather_ray(const SceneView *sc, const Cut *cut, int max_specular, 
  * k - 1 and k moves by 1 / (r sin theta) along its normal v_k, over
  * (sin theta_j+1 - sin theta_j) / r in all, r the nearer of the two cells'
  * distances. (The rotational gradient, measured too, changed no demo
- * scene's error: their cache points lie on flat surfaces.) This work-item's
- * share of the cells, summed in the tangent frame: (x, y) per colour
- * channel, of pi L. */
-inline void Gather_gradient_share(const __global float4 *cell, int strata, int lid, float2 *grad) {
-    int rays = strata * strata;
+ * scene's error: their cache points lie on flat surfaces.) The sum over
+ * the cells in the tangent frame: (x, y) per colour channel, of pi L. */
+inline void Gather_gradient(const __global float4 *cell, int strata, float2 *grad) {
     float inv_m = 1.0f / (float)strata, sector = 2.0f * PI_F * inv_m;
     for (int c = 0; c < 3; ++c) grad[c] = (float2)(0.0f);
-    for (int q = lid; q < rays; q += GATHER_GROUP) {
-        int j = q % strata, k = q / strata;
-        float4 here = cell[q];
-        float sin_lo = sqrt((float)j * inv_m), sin_hi = sqrt((float)(j + 1) * inv_m);
-        /* the border with the sector before, in the same ring */
-        float4 before = cell[((k + strata - 1) % strata) * strata + j];
-        float across = (sin_hi - sin_lo) / fmin(here.w, before.w);
+    for (int k = 0; k < strata; ++k) {
+        /* sector k: the normal of its border with the sector before, its middle direction */
         float2 v_k = (float2)(-sin((float)k * sector), cos((float)k * sector));
-        float3 step_phi = (here.xyz - before.xyz) * (isfinite(across) ? across : 0.0f);
-        /* the border with the ring inside, in the same sector */
-        float3 step_theta = (float3)(0.0f);
         float mid = ((float)k + 0.5f) * sector;
         float2 u_k = (float2)(cos(mid), sin(mid));
-        if (j > 0) {
-            float4 inner = cell[q - 1];
-            float along = sector * sin_lo * (1.0f - (float)j * inv_m) / fmin(here.w, inner.w);
-            step_theta = (here.xyz - inner.xyz) * (isfinite(along) ? along : 0.0f);
+        for (int j = 0; j < strata; ++j) {
+            int q = k * strata + j;
+            float4 here = cell[q];
+            float sin_lo = sqrt((float)j * inv_m), sin_hi = sqrt((float)(j + 1) * inv_m);
+            /* the border with the sector before, in the same ring */
+            float4 before = cell[((k + strata - 1) % strata) * strata + j];
+            float across = (sin_hi - sin_lo) / fmin(here.w, before.w);
+            float3 step_phi = (here.xyz - before.xyz) * (isfinite(across) ? across : 0.0f);
+            /* the border with the ring inside, in the same sector */
+            float3 step_theta = (float3)(0.0f);
+            if (j > 0) {
+                float4 inner = cell[q - 1];
+                float along = sector * sin_lo * (1.0f - (float)j * inv_m) / fmin(here.w, inner.w);
+                step_theta = (here.xyz - inner.xyz) * (isfinite(along) ? along : 0.0f);
+            }
+            grad[0] += step_theta.x * u_k + step_phi.x * v_k;
+            grad[1] += step_theta.y * u_k + step_phi.y * v_k;
+            grad[2] += step_theta.z * u_k + step_phi.z * v_k;
         }
-        grad[0] += step_theta.x * u_k + step_phi.x * v_k;
-        grad[1] += step_theta.y * u_k + step_phi.y * v_k;
-        grad[2] += step_theta.z * u_k + step_phi.z * v_k;
     }
 }
 
-/* Work-group g gathers sample first + g, for the samples before end (a
- * launch's grid may hold a few groups more). Outputs per sample:
- * irradiance (rgb), harmonic mean hit distance (INFINITY when no ray hit),
- * hits, and its translational gradient (Gather_gradient_share) as three
- * rows dE/dx, dE/dy, dE/dz, rgb each. Each ray's radiance and first-hit
- * distance pass through cells (strata^2 per sample of the launch). */
-__kernel void Gather_samples(SCENE_PARAMS, CUT_PARAMS, const __global float4 *sample_pos, const __global float4 *sample_nrm,
-                             const int first, const int end, const int strata, const int max_specular,
-                             const uint seed, __global float4 *cells, __global float4 *out_irradiance,
-                             __global float *out_distance, __global int *out_hits, __global float4 *out_gradient) {
-    __local float4 sum_s[GATHER_GROUP];
-    __local int hits_s[GATHER_GROUP];
-    __local float2 grad_s[3][GATHER_GROUP];
-    int s = first + Launch_group_id(), lid = get_local_id(0);
-    int rays = strata * strata;
-    __global float4 *cell = cells + (s < end ? (size_t)(s - first) * (size_t)rays : 0); /* this sample's */
+/* The bits of v (10 of them) spread to every third place: a Morton code's x. */
+inline uint Gather_spread(uint v) {
+    v = (v | (v << 16)) & 0x030000FFu;
+    v = (v | (v << 8)) & 0x0300F00Fu;
+    v = (v | (v << 4)) & 0x030C30C3u;
+    return (v | (v << 2)) & 0x09249249u;
+}
+
+/* The Morton code (GATHER_KEY_BITS per axis) of p in the cube of half-side
+ * `half` around the origin. */
+inline uint Gather_key(float3 p, float extent) {
+    float cells = (float)(1 << GATHER_KEY_BITS);
+    float3 c = clamp((p / extent * 0.5f + 0.5f) * cells, 0.0f, cells - 1.0f);
+    uint3 q = convert_uint3(c);
+    return Gather_spread(q.x) | (Gather_spread(q.y) << 1) | (Gather_spread(q.z) << 2);
+}
+
+/* Work-item g traces ray r = g % rays of sample s = first + g / rays, for
+ * the count samples from first. The ray's radiance but its first diffuse
+ * hit's light, and its first-hit distance, go to cells[g], the distance of
+ * its first diffuse hit (< 0 where none) to distances[g], the lookup left
+ * for that hit to lookup_*[g] and the Morton code of its point to keys[g]
+ * (0 where none; `extent`: the half-side of a cube around the scene). */
+__kernel void Gather_rays(SCENE_PARAMS, CUT_PARAMS, const __global float4 *sample_pos,
+                          const __global float4 *sample_nrm, const int first, const int count, const int strata,
+                          const int max_specular, const uint seed, const float extent, __global float4 *cells,
+                          __global float *distances, __global float4 *lookup_pos, __global float4 *lookup_nrm,
+                          __global float4 *lookup_weight, __global uint *keys) {
+    int g = Launch_global_id(), rays = strata * strata;
+    if (g >= count * rays) return;
+    int s = first + g / rays, r = g % rays;
+    SceneView sc = SCENE_MAKE();
+    Cut cut = CUT_MAKE();
+    float t, first_hit;
+    GatherLookup deferred = {(float3)(0.0f), (float3)(0.0f), (float4)(0.0f)};
+    float3 radiance = Gather_ray(&sc, &cut, max_specular, sample_pos[s].xyz, sample_nrm[s].xyz, s, r, strata, seed,
+                                 &t, &first_hit, &deferred);
+    cells[g] = (float4)(radiance, first_hit);
+    distances[g] = t;
+    lookup_pos[g] = (float4)(deferred.p, 0.0f);
+    lookup_nrm[g] = (float4)(deferred.n, 0.0f);
+    lookup_weight[g] = deferred.weight;
+    keys[g] = deferred.weight.w != 0.0f ? Gather_key(deferred.p, extent) : 0u;
+}
+
+/* The lookups Gather_rays left, in space order (order[j]: the ray of the
+ * j-th smallest key, j < n), so that neighbouring work-items search
+ * neighbouring parts of the cut's tree: each ray's light added to its cell. */
+__kernel void Gather_lookup(CUT_PARAMS, const __global int *order, const int n, const __global float4 *lookup_pos,
+                            const __global float4 *lookup_nrm, const __global float4 *lookup_weight,
+                            __global float4 *cells) {
+    int j = Launch_global_id();
+    if (j >= n) return;
+    int slot = order[j];
+    float4 w = lookup_weight[slot];
+    if (w.w == 0.0f) return;
+    Cut cut = CUT_MAKE();
+    float3 light = w.xyz * CutLookup_light(&cut, lookup_pos[slot].xyz, lookup_nrm[slot].xyz);
+    cells[slot].xyz += light;
+}
+
+/* Work-item i reduces the rays of sample s = first + i, for the count
+ * samples from first (their rays at cells[i rays ...]). Outputs per sample: irradiance (rgb), harmonic mean
+ * hit distance (INFINITY when no ray hit), hits, and its translational
+ * gradient (Gather_gradient) as three rows dE/dx, dE/dy, dE/dz, rgb each. */
+__kernel void Gather_reduce(const __global float4 *sample_nrm, const int first, const int count, const int strata, const __global float4 *cells,
+                            const __global float *distances, __global float4 *out_irradiance,
+                            __global float *out_distance, __global int *out_hits, __global float4 *out_gradient) {
+    int i = Launch_global_id(), rays = strata * strata;
+    if (i >= count) return;
+    const __global float4 *cell = cells + (size_t)i * rays; /* this sample's */
+    const __global float *distance = distances + (size_t)i * rays;
     float3 sum = (float3)(0.0f);
     float inv_distance = 0.0f;
     int hits = 0;
-    float3 n = (float3)(0.0f, 0.0f, 1.0f);
-    if (s < end) {
-        SceneView sc = SCENE_MAKE();
-        Cut cut = CUT_MAKE();
-        float3 p = sample_pos[s].xyz;
-        n = sample_nrm[s].xyz;
-        for (int r = lid; r < rays; r += GATHER_GROUP) {
-            float t, first_hit;
-            float3 radiance = Gather_ray(&sc, &cut, max_specular, p, n, s, r, strata, seed, &t, &first_hit);
-            sum += radiance;
-            cell[r] = (float4)(radiance, first_hit);
-            if (t >= 0.0f) {
-                inv_distance += 1.0f / fmax(t, 1e-30f);
-                hits++;
-            }
+    for (int r = 0; r < rays; ++r) {
+        sum += cell[r].xyz;
+        float t = distance[r];
+        if (t >= 0.0f) {
+            inv_distance += 1.0f / fmax(t, 1e-30f);
+            hits++;
         }
     }
-    barrier(CLK_GLOBAL_MEM_FENCE);
-    float2 grad[3] = {(float2)(0.0f), (float2)(0.0f), (float2)(0.0f)};
-    if (s < end) Gather_gradient_share(cell, strata, lid, grad);
-    sum_s[lid] = (float4)(sum, inv_distance);
-    hits_s[lid] = hits;
-    for (int c = 0; c < 3; ++c) grad_s[c][lid] = grad[c];
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (int step = GATHER_GROUP / 2; step > 0; step /= 2) {
-        if (lid < step) {
-            sum_s[lid] += sum_s[lid + step];
-            hits_s[lid] += hits_s[lid + step];
-            for (int c = 0; c < 3; ++c) grad_s[c][lid] += grad_s[c][lid + step];
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0 && s < end) {
-        float4 total = sum_s[0];
-        out_irradiance[s] = (float4)(total.xyz / (float)rays, 0.0f);
-        out_distance[s] = hits_s[0] > 0 ? (float)hits_s[0] / total.w : INFINITY;
-        out_hits[s] = hits_s[0];
-        /* the cells hold pi L: the gradient in the world is the sum / pi */
-        float3 t, b;
-        Sampling_frame(n, &t, &b);
-        float3 g[3];
-        for (int c = 0; c < 3; ++c) g[c] = (grad_s[c][0].x * t + grad_s[c][0].y * b) * (1.0f / PI_F);
-        out_gradient[3 * s + 0] = (float4)(g[0].x, g[1].x, g[2].x, 0.0f);
-        out_gradient[3 * s + 1] = (float4)(g[0].y, g[1].y, g[2].y, 0.0f);
-        out_gradient[3 * s + 2] = (float4)(g[0].z, g[1].z, g[2].z, 0.0f);
-    }
+    float2 grad[3];
+    Gather_gradient(cell, strata, grad);
+    int s = first + i;
+    out_irradiance[s] = (float4)(sum / (float)rays, 0.0f);
+    out_distance[s] = hits > 0 ? (float)hits / inv_distance : INFINITY;
+    out_hits[s] = hits;
+    /* the cells hold pi L: the gradient in the world is the sum / pi */
+    float3 t, b;
+    Sampling_frame(sample_nrm[s].xyz, &t, &b);
+    float3 g[3];
+    for (int c = 0; c < 3; ++c) g[c] = (grad[c].x * t + grad[c].y * b) * (1.0f / PI_F);
+    out_gradient[3 * s + 0] = (float4)(g[0].x, g[1].x, g[2].x, 0.0f);
+    out_gradient[3 * s + 1] = (float4)(g[0].y, g[1].y, g[2].y, 0.0f);
+    out_gradient[3 * s + 2] = (float4)(g[0].z, g[1].z, g[2].z, 0.0f);
 }

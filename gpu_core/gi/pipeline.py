@@ -217,7 +217,7 @@ def programs(device: Device, settings: RenderSettings, stages: list[str], scene_
     wanted = shading_points.programs(scene_defines)
     if "final_gather" in stages:
         wanted += samples.programs() + cut.programs(settings.photon_k)
-        wanted += gather.programs(device, scene_defines) + neighbours.programs()
+        wanted += gather.programs(scene_defines) + neighbours.programs()
         wanted += interpolation.programs()
     if "caustics" in stages:
         wanted += query_programs(settings.caustic_k)  # the caustic map's estimates, seen directly and in the cut

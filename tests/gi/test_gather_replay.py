@@ -1,5 +1,5 @@
-"""bench/gather_replay.py: a gather launch saved during a render replays
-alone to the render's own outputs, whole or over a range of its samples."""
+"""bench/gather_replay.py: a gather saved during a render replays alone to
+the render's own outputs, whole or over a range of its samples."""
 
 from __future__ import annotations
 
@@ -10,8 +10,7 @@ import sys
 import numpy as np
 from scenes_py import box_scene
 
-from gpu_core.device.device import Device
-from gpu_core.device.kernels import Kernel
+from gpu_core.gi import gather
 from gpu_core.renderer import Renderer
 from gpu_core.settings import RenderSettings
 
@@ -22,12 +21,12 @@ GI = RenderSettings(mode="gi", samples=2, global_photons=20_000, caustic_photons
                     cache_seeds=80, gather_rays=16)
 
 
-def test_a_saved_gather_launch_replays_to_the_outputs_of_the_render_it_came_from(device, tmp_path):
+def test_a_saved_gather_replays_to_the_outputs_of_the_render_it_came_from(device, tmp_path):
     path = str(tmp_path / "launch.pkl")
-    launching, making = Kernel._enqueue, Device.kernel
+    gathering = gather.gather_range
     with LaunchRecorder(path):
         result = Renderer(device).render(box_scene(mirror=True), GI)
-    assert (Kernel._enqueue, Device.kernel) == (launching, making)
+    assert gather.gather_range is gathering
     with open(path, "rb") as f:
         launch = pickle.load(f)
     whole = replay(device, launch)

@@ -12,6 +12,7 @@ from scenes_py import box_scene, camera_looking_down, on_device, plane_scene, qu
 from gpu_core.device.layout import float4_rows
 from gpu_core.gi import cut, gather, shading_points
 from gpu_core.gi.cache import neighbours
+from gpu_core.photons.trace import trace_photon_maps
 from gpu_core.renderer import Renderer
 from gpu_core.scene import LIGHT_AREA, Lights
 from gpu_core.settings import RenderSettings
@@ -78,6 +79,28 @@ def test_gather_gradient_matches_finite_differences_of_the_gathered_irradiance(d
         assert g[0] > 0.0
         assert abs(np.linalg.norm(g) / np.linalg.norm(d) - 1.0) < 0.15
         assert np.dot(g, d) / (np.linalg.norm(g) * np.linalg.norm(d)) > np.cos(np.radians(6.0))
+
+
+def test_gather_is_the_same_in_batches_of_any_size(device, monkeypatch):
+    # each batch sorts its rays' cut lookups along a Morton curve: the order
+    # of the lookups changes with the batch, a ray's light must not
+    scene, up = on_device(device, box_scene(albedo=0.5, mirror=True))
+    maps = trace_photon_maps(device, scene, 20_000, 20_000)
+    the_cut = cut.with_caustics(cut.select(device, maps.global_map, 20), maps.caustic_map, 16)
+    assert the_cut.count > 50
+    points = shading_points.trace(device, up, (0, 0, 24, 24), 8)
+    pick = np.random.default_rng(1).choice(len(points.positions), 30, replace=False)
+    positions = device.to_device(float4_rows(points.positions[pick]))
+    normals = device.to_device(float4_rows(points.normals[pick]))
+
+    def gathered():
+        result = gather.gather(device, up, positions, normals, len(pick), 8, the_cut)
+        return result.irradiance, result.harmonic_distance, result.translational_gradient
+    whole = gathered()
+    monkeypatch.setattr(gather, "_RAYS_PER_LAUNCH", 3 * 64)  # 3 samples a batch: 10 sorts
+    for one, other in zip(whole, gathered()):
+        np.testing.assert_array_equal(one, other)
+    assert whole[0].min() > 0.0
 
 
 def test_shading_points_look_through_mirrors_to_the_surfaces_they_show(device):

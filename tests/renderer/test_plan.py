@@ -10,6 +10,7 @@ import pytest
 from scenes_py import camera_looking_down, make_scene, quad
 
 from gpu_core.errors import BudgetError
+from gpu_core.gi import gather
 from gpu_core.plan import Held, plan
 from gpu_core.renderer import Renderer
 from gpu_core.scene import LIGHT_POINT, PARTS, Lights, Materials, validate
@@ -150,6 +151,14 @@ def test_gi_memory_counts_in_the_budget_before_any_kernel_runs():
     reference.check_budget(device)
     with pytest.raises(BudgetError, match="small device"):
         gi.check_budget(device)
+
+
+def test_the_gathers_batch_of_rays_counts_in_the_budget():
+    scene = validate(room())
+    few, many = (plan(scene, dataclasses.replace(GI, cache_seeds=4000, gather_rays=rays)) for rays in (16, 1024))
+    grown = gather.batch_bytes(4000, 32) - gather.batch_bytes(4000, 4)
+    assert grown > 16 * 2**20  # a batch of 2^18 rays against one of 16,000
+    assert many.device_bytes - few.device_bytes == grown
 
 
 def test_cache_records_are_kept_for_a_new_view_of_the_same_lit_scene_only():
