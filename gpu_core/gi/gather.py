@@ -47,7 +47,7 @@ def _defines(scene_defines: dict | None) -> dict:
 
 def programs(scene_defines: dict) -> list[tuple[str, dict]]:
     """The programs gathering builds."""
-    return [(_PROGRAM, _defines(scene_defines)), *primitives.programs()]
+    return [(_PROGRAM, _defines(scene_defines))]
 
 
 @dataclass
