@@ -1,4 +1,5 @@
-"""One final gather, saved on one OpenCL device and replayed alone on any: where GI frames fail on one driver and not on another (README, "On an
+"""One final gather, saved on one OpenCL device and replayed alone on any:
+where GI frames fail on one driver and not on another (README, "On an
 NVIDIA H100, a third round"), the same inputs run on both.
 
     python bench/gather_replay.py save [--device NVIDIA] [--seconds 120] [--watchdog 30]
@@ -42,7 +43,6 @@ sys.path.insert(0, ROOT)
 
 from gpu_core.device import get_device  # noqa: E402
 from gpu_core.device.device import Device  # noqa: E402
-
 from gpu_core.gi import gather  # noqa: E402
 
 LAUNCH = os.path.join(ROOT, ".cache", "gather_launch.pkl")
