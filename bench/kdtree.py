@@ -2,8 +2,9 @@
 
 Both trace the same procedural meshes (clusters of displaced spheres) with
 the same rays in the same run: incoherent rays (random origins in the
-scene's box, random directions) and camera rays (a pinhole camera looking
-at the mesh). Every figure is the median of ``--repeats`` runs after a
+scene's box, random directions), the same rays sorted (by direction octant,
+then along a Morton curve of their origins: what ordering alone gives) and
+camera rays (a pinhole camera looking at the mesh). Every figure is the median of ``--repeats`` runs after a
 warm-up. Embree (through ``embreex``) builds with its own threads;
 ``embreex`` traces its rays one at a time on one thread, so its
 throughput is also measured on two forked processes, one per core, each
@@ -43,6 +44,7 @@ from gpu_core.device import get_device  # noqa: E402
 from machine import describe  # noqa: E402
 
 DEFAULT_SIZES = [1_000, 10_000, 100_000, 650_000, 1_000_000]
+KINDS = ("incoherent", "sorted", "camera")  # ray sets, in the tables' order
 RESULTS = ROOT / "bench" / "results" / "kdtree.json"
 FIGURE = ROOT / "bench" / "figures" / "kdtree.png"
 
@@ -82,6 +84,20 @@ def incoherent_rays(tris: np.ndarray, count: int, seed: int = 1):
     dirs = rng.standard_normal((count, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     return org.astype(np.float32), dirs.astype(np.float32)
+
+
+def sorted_rays(org: np.ndarray, dirs: np.ndarray):
+    """The rays ordered by direction octant, then along a Morton curve of
+    their origins (10 bits an axis over their box)."""
+    lo, hi = org.min(0), org.max(0)
+    cells = ((org - lo) / np.maximum(hi - lo, 1e-30) * 1023.0).astype(np.int64)
+    code = np.zeros(len(org), np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+    octant = (dirs[:, 0] > 0).astype(np.int64) | ((dirs[:, 1] > 0) << 1) | ((dirs[:, 2] > 0) << 2)
+    order = np.lexsort((code, octant))
+    return np.ascontiguousarray(org[order]), np.ascontiguousarray(dirs[order])
 
 
 def camera_rays(tris: np.ndarray, count: int):
@@ -211,7 +227,9 @@ def measure(device, triangles: int, rays: int, repeats: int) -> dict:
 
     _FORKED_SCENE = scene
     with multiprocessing.get_context("fork").Pool(2) as pool:
-        kinds = {"incoherent": incoherent_rays(tris, rays), "camera": camera_rays(tris, rays)}
+        kinds = {"incoherent": incoherent_rays(tris, rays)}
+        kinds["sorted"] = sorted_rays(*kinds["incoherent"])
+        kinds["camera"] = camera_rays(tris, rays)
         for kind, (org, dirs) in kinds.items():
             ours_ms, (t, tri) = median_ms(lambda: tree.intersect(org, dirs), repeats)
             one_ms, (e_tri, e_t) = median_ms(lambda: embree_trace(scene, org, dirs), repeats)
@@ -236,17 +254,18 @@ def measure(device, triangles: int, rays: int, repeats: int) -> dict:
 
 def table(rows) -> str:
     """The results as a markdown table, ratios ours / Embree."""
-    head = ("triangles", "build ms", "Embree ms", "ratio",
-            "incoh. Mray/s", "Embree 1t/2p", "ratio", "camera Mray/s", "Embree 1t/2p", "ratio", "same hit % inc/cam")
+    head = ("triangles", "build ms", "Embree ms", "ratio", "incoh. Mray/s", "Embree 1t/2p", "ratio",
+            "sorted Mray/s", "Embree 1t/2p", "ratio", "camera Mray/s", "Embree 1t/2p", "ratio",
+            "same hit % inc/sorted/cam")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [f"{r['triangles']:,}", f"{r['build_ms']:.1f}", f"{r['embree_build_ms']:.1f}",
                  f"{r['build_ms'] / r['embree_build_ms']:.2f}"]
-        for kind in ("incoherent", "camera"):
+        for kind in KINDS:
             k = r[kind]
             cells += [f"{k['ours_mrays']:.2f}", f"{k['embree_1t_mrays']:.2f} / {k['embree_2p_mrays']:.2f}",
                       f"{k['ours_mrays'] / max(k['embree_1t_mrays'], k['embree_2p_mrays']):.2f}"]
-        cells.append(" / ".join(f"{100 * r[kind]['same_triangle']:.2f}" for kind in ("incoherent", "camera")))
+        cells.append(" / ".join(f"{100 * r[kind]['same_triangle']:.2f}" for kind in KINDS))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -265,7 +284,7 @@ def plot(rows, path: Path) -> None:
     left.loglog(n, [r["embree_build_ms"] for r in rows], "s--", color="C0", label="Embree (commit)")
     left.loglog(n, [r["embree_build_total_ms"] for r in rows], "s:", color="C7", label="Embree (copy + commit)")
     left.set(xlabel="triangles", ylabel="build time (ms)", title="Build")
-    for kind, marker, colour in (("incoherent", "o", "C1"), ("camera", "^", "C2")):
+    for kind, marker, colour in (("incoherent", "o", "C1"), ("sorted", "s", "C3"), ("camera", "^", "C2")):
         right.semilogx(n, [r[kind]["ours_mrays"] for r in rows], marker + "-", color=colour, label=f"ours, {kind}")
         best = [max(r[kind]["embree_1t_mrays"], r[kind]["embree_2p_mrays"]) for r in rows]
         right.semilogx(n, best, marker + "--", color=colour, label=f"Embree, {kind}")
