@@ -57,8 +57,11 @@ for _bundle, _members in ((BUNDLE, BUNDLED), (SCENE_BUNDLE, SCENE_BUNDLED)):
 _OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
 _CACHE_FORMAT = "3"
 # platforms whose program builds must not run in parallel threads, nor
-# load a binary from the disk cache (Oclgrind's compiler crashes on both)
+# load a binary from the disk cache (Oclgrind's compiler crashes on both);
+# their interpreter lacks some LLVM intrinsics (llvm.bitreverse), which
+# kernels then leave to portable code (GPUGI_SIMULATOR)
 _SIMULATOR_PLATFORMS = ("oclgrind",)
+_SIMULATOR_MARK = "-DGPUGI_SIMULATOR=1"
 # A PoCL program binary holds every kernel compiled for any work-group size,
 # which compiles each kernel a second time (the launches compile their own
 # size): 11 of the 24 s of a first render. There the cache keeps the
@@ -381,6 +384,8 @@ class Programs:
             options = options + (_EXACT_DIVISION,)
         if self._separate:
             options = options + (_SEPARATE_MARK,)
+        if self._simulator:
+            options = options + (_SIMULATOR_MARK,)
         dev = self.device
         ident = "\n".join([_CACHE_FORMAT, source, " ".join(options), dev.platform.name, dev.platform.version,
                            dev.name, dev.driver_version, cl.VERSION_TEXT, os.environ.get("POCL_WORK_GROUP_SPECIALIZATION", "")])

@@ -44,9 +44,19 @@ inline float2 Rng_r2(uint index, uint ox, uint oy) {
 
 /* x with its 32 bits in reverse order: the compiler's builtin where it has
  * one (a byte swap and three steps on a CPU, one instruction on some),
- * else five swap steps. */
+ * else five swap steps. A simulator's interpreter lacks the builtin's LLVM
+ * intrinsic, which its compiler also makes of the swap steps: there each
+ * byte is reversed on its own (three multiplies, Anderson's bit hacks). */
 inline uint Rng_reverse(uint x) {
-#if defined(__has_builtin) && __has_builtin(__builtin_bitreverse32)
+#if defined(GPUGI_SIMULATOR)
+    uint r = 0u;
+    for (int b = 0; b < 4; ++b) {
+        ulong byte = (x >> (8 * b)) & 0xffU;
+        uint flipped = (uint)((((byte * 0x80200802UL) & 0x0884422110UL) * 0x0101010101UL) >> 32) & 0xffU;
+        r |= flipped << (24 - 8 * b);
+    }
+    return r;
+#elif defined(__has_builtin) && __has_builtin(__builtin_bitreverse32)
     return __builtin_bitreverse32(x);
 #else
     x = ((x >> 1) & 0x55555555U) | ((x & 0x55555555U) << 1);

@@ -67,3 +67,14 @@ def test_sobol_pairs_of_different_seeds_are_uncorrelated_and_differ(sobol):
             assert abs(np.corrcoef(a[:, i], b[:, j])[0, 1]) < 0.15
     # uniform and not random: the mean of 1024 points is far closer to 1/2 than chance allows
     assert np.abs(a.mean(0) - 0.5).max() < 2e-3
+
+
+def test_the_simulators_bit_reversal_gives_the_same_pairs(device, probe_program, sobol, tmp_path):
+    # on Oclgrind (GPUGI_SIMULATOR) bits are reversed byte by byte, its
+    # interpreter lacking the builtin's intrinsic: the same sequences
+    probe_program("rng_probe_simulator.cl", "#define GPUGI_SIMULATOR 1\n" + _KERNEL)
+    kernel = cl.Kernel(device.program("rng_probe_simulator.cl"), "Rng_probe")
+    for seed in (0, 5, 0xFFFFFFFF):
+        out = device.empty(8 * COUNT)
+        kernel(device.queue, (COUNT,), None, np.uint32(seed), out)
+        np.testing.assert_array_equal(device.read(out, 2 * COUNT, np.float32).reshape(COUNT, 2), sobol(seed))
