@@ -40,6 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from gpu_core.accel import kdtree  # noqa: E402
+from gpu_core.accel.point_tree import morton_codes  # noqa: E402
 from gpu_core.device import get_device  # noqa: E402
 from machine import describe  # noqa: E402
 
@@ -89,14 +90,8 @@ def incoherent_rays(tris: np.ndarray, count: int, seed: int = 1):
 def sorted_rays(org: np.ndarray, dirs: np.ndarray):
     """The rays ordered by direction octant, then along a Morton curve of
     their origins (10 bits an axis over their box)."""
-    lo, hi = org.min(0), org.max(0)
-    cells = ((org - lo) / np.maximum(hi - lo, 1e-30) * 1023.0).astype(np.int64)
-    code = np.zeros(len(org), np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
     octant = (dirs[:, 0] > 0).astype(np.int64) | ((dirs[:, 1] > 0) << 1) | ((dirs[:, 2] > 0) << 2)
-    order = np.lexsort((code, octant))
+    order = np.lexsort((morton_codes(org), octant))
     return np.ascontiguousarray(org[order]), np.ascontiguousarray(dirs[order])
 
 

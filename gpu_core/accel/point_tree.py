@@ -38,9 +38,8 @@ def _as_points(array, name: str) -> np.ndarray:
     return finite_rows(name, array, 3, np.float32)
 
 
-def _spatial_order(points: np.ndarray) -> np.ndarray:
-    """A permutation visiting ``points`` along a Morton curve, so that
-    neighbouring work items search neighbouring parts of the tree."""
+def morton_codes(points: np.ndarray) -> np.ndarray:
+    """(N,) uint32 Morton codes of (N, 3) ``points``, 10 bits an axis over their box."""
     lo = points.min(axis=0)
     scale = 1023.0 / np.maximum(points.max(axis=0) - lo, 1e-30)
     cells = ((points - lo) * scale).astype(np.uint32)
@@ -51,8 +50,13 @@ def _spatial_order(points: np.ndarray) -> np.ndarray:
         v = (v | (v << 4)) & 0x030C30C3
         return (v | (v << 2)) & 0x09249249
 
-    code = spread(cells[:, 0]) | (spread(cells[:, 1]) << 1) | (spread(cells[:, 2]) << 2)
-    return np.argsort(code, kind="stable")
+    return spread(cells[:, 0]) | (spread(cells[:, 1]) << 1) | (spread(cells[:, 2]) << 2)
+
+
+def _spatial_order(points: np.ndarray) -> np.ndarray:
+    """A permutation visiting ``points`` along a Morton curve, so that
+    neighbouring work items search neighbouring parts of the tree."""
+    return np.argsort(morton_codes(points), kind="stable")
 
 
 class PointTree:

@@ -156,7 +156,7 @@ inline uint Gather_spread(uint v) {
 }
 
 /* The Morton code (GATHER_KEY_BITS per axis) of p in the cube of half-side
- * `half` around the origin. */
+ * `extent` around the origin. */
 inline uint Gather_key(float3 p, float extent) {
     float cells = (float)(1 << GATHER_KEY_BITS);
     float3 c = clamp((p / extent * 0.5f + 0.5f) * cells, 0.0f, cells - 1.0f);
@@ -209,12 +209,14 @@ __kernel void Gather_lookup(CUT_PARAMS, const __global int *order, const int n, 
 }
 
 /* Work-item i reduces the rays of sample s = first + i, for the count
- * samples from first (their rays at cells[i rays ...]). Outputs per sample: irradiance (rgb), harmonic mean
- * hit distance (INFINITY when no ray hit), hits, and its translational
- * gradient (Gather_gradient) as three rows dE/dx, dE/dy, dE/dz, rgb each. */
-__kernel void Gather_reduce(const __global float4 *sample_nrm, const int first, const int count, const int strata, const __global float4 *cells,
-                            const __global float *distances, __global float4 *out_irradiance,
-                            __global float *out_distance, __global int *out_hits, __global float4 *out_gradient) {
+ * samples from first (their rays at cells[i rays ...]). Outputs per
+ * sample: irradiance (rgb), harmonic mean hit distance (INFINITY when no
+ * ray hit), hits, and its translational gradient (Gather_gradient) as three
+ * rows dE/dx, dE/dy, dE/dz, rgb each. */
+__kernel void Gather_reduce(const __global float4 *sample_nrm, const int first, const int count, const int strata,
+                            const __global float4 *cells, const __global float *distances,
+                            __global float4 *out_irradiance, __global float *out_distance, __global int *out_hits,
+                            __global float4 *out_gradient) {
     int i = Launch_global_id(), rays = strata * strata;
     if (i >= count) return;
     const __global float4 *cell = cells + (size_t)i * rays; /* this sample's */
