@@ -92,12 +92,9 @@ __kernel void PointBuild_root_chunks(const __global BuildNode *nodes, const __gl
     PointBuild_write_chunks(chunks, 0, chunk_end[0], 0, nodes[0].start, nodes[0].count);
 }
 
-/* Bounding box of each chunk's points. */
-__kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __global float4 *pts,
-                                 __global float4 *chunk_lo, __global float4 *chunk_hi,
-                                 const __global int *chunk_end, const int n_active) {
-    int c = Launch_global_id();
-    if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
+/* Bounding box of chunk c's points. */
+inline void PointBuild_chunk_bounds_at(int c, const __global Chunk *chunks, const __global float4 *pts,
+                                       __global float4 *chunk_lo, __global float4 *chunk_hi) {
     Chunk ch = chunks[c];
     float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
     for (int i = 0; i < ch.count; ++i) {
@@ -107,6 +104,13 @@ __kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __glob
     }
     chunk_lo[c] = lo;
     chunk_hi[c] = hi;
+}
+
+__kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __global float4 *pts,
+                                 __global float4 *chunk_lo, __global float4 *chunk_hi,
+                                 const __global int *chunk_end, const int n_active) {
+    int c = Launch_global_id();
+    if (c < PointBuild_chunk_total(chunk_end, n_active)) PointBuild_chunk_bounds_at(c, chunks, pts, chunk_lo, chunk_hi);
 }
 
 /* Spatial-median split of the longest axis of the cell lo..hi that the
@@ -135,12 +139,10 @@ inline PointBuildPlane PointBuild_median(float4 lo, float4 hi, float4 tlo, float
  * median of its cell's longest axis (x_plane; X is split one level deeper,
  * in the same pass), or, with no side to cut, split the node itself there.
  * A cut leaves the points on one side and nothing on the other. */
-__kernel void PointBuild_large_decide(const __global int *active, __global BuildNode *nodes,
-                                 const __global int *chunk_end, const __global float4 *chunk_lo,
-                                 const __global float4 *chunk_hi, const float empty_ratio,
-                                 const int max_depth, __global float4 *x_plane, const int n_active) {
-    int j = Launch_global_id();
-    if (j >= n_active) return;
+inline void PointBuild_large_decide_at(int j, const __global int *active, __global BuildNode *nodes,
+                                      const __global int *chunk_end, const __global float4 *chunk_lo,
+                                      const __global float4 *chunk_hi, float empty_ratio, int max_depth,
+                                      __global float4 *x_plane) {
     int id = active[j];
     BuildNode nd = nodes[id];
     int first = j > 0 ? chunk_end[j - 1] : 0;
@@ -190,25 +192,39 @@ __kernel void PointBuild_large_decide(const __global int *active, __global Build
     x_plane[j] = (float4)(0.0f, as_float(-1), 0.0f, 0.0f);
 }
 
-/* Points of each chunk that go to the left child; 0 past the last chunk,
- * up to the bound, so that the bound's prefix sums hold. */
-__kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __global int *active,
-                                     const __global BuildNode *nodes, const __global float4 *x_plane,
-                                     const __global float4 *pts, __global int *chunk_left,
-                                     const __global int *chunk_end, const int n_active, const int bound) {
-    int c = Launch_global_id();
-    if (c >= bound) return;
-    if (c >= PointBuild_chunk_total(chunk_end, n_active)) {
-        chunk_left[c] = 0;
-        return;
-    }
+__kernel void PointBuild_large_decide(const __global int *active, __global BuildNode *nodes,
+                                 const __global int *chunk_end, const __global float4 *chunk_lo,
+                                 const __global float4 *chunk_hi, const float empty_ratio,
+                                 const int max_depth, __global float4 *x_plane, const int n_active) {
+    int j = Launch_global_id();
+    if (j < n_active)
+        PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth, x_plane);
+}
+
+/* Points of chunk c that go to the left child. */
+inline int PointBuild_chunk_count_left_at(int c, const __global Chunk *chunks, const __global int *active,
+                                          const __global BuildNode *nodes, const __global float4 *x_plane,
+                                          const __global float4 *pts) {
     Chunk ch = chunks[c];
     BuildNode nd = nodes[active[ch.slot]];
     PointBuildPlane plane = PointBuild_partition(&nd, x_plane[ch.slot]);
     int n = 0;
     for (int i = 0; i < ch.count; ++i)
         n += PointBuild_goes_left(plane, nd.count, pts[ch.start + i], ch.rank * POINT_BUILD_CHUNK + i) ? 1 : 0;
-    chunk_left[c] = n;
+    return n;
+}
+
+/* Each chunk's left count; 0 past the last chunk, up to the bound, so that
+ * the bound's prefix sums hold. */
+__kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __global int *active,
+                                     const __global BuildNode *nodes, const __global float4 *x_plane,
+                                     const __global float4 *pts, __global int *chunk_left,
+                                     const __global int *chunk_end, const int n_active, const int bound) {
+    int c = Launch_global_id();
+    if (c >= bound) return;
+    chunk_left[c] = c < PointBuild_chunk_total(chunk_end, n_active)
+                        ? PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, pts)
+                        : 0;
 }
 
 /* Class of a new node as counters, scanned together: s0 1 when it is
@@ -256,12 +272,10 @@ inline void PointBuild_sides(const BuildNode *nd, PointBuildPlane plane, BuildNo
  * (holes otherwise), with their classes (PointBuild_class) in the
  * same slots of `classes`; left_end is the inclusive scan of the chunks'
  * left counts. */
-__kernel void PointBuild_large_split(const __global int *active, __global BuildNode *nodes,
-                                const __global int *chunk_end, const __global int *left_end,
-                                const __global float4 *x_plane, const int child_base, const int max_depth,
-                                __global int8 *classes, const int n_active) {
-    int j = Launch_global_id();
-    if (j >= n_active) return;
+inline void PointBuild_large_split_at(int j, const __global int *active, __global BuildNode *nodes,
+                                     const __global int *chunk_end, const __global int *left_end,
+                                     const __global float4 *x_plane, int child_base, int max_depth,
+                                     __global int8 *classes, int n_active) {
     int id = active[j];
     BuildNode nd = nodes[id];
     int n_left = PointBuild_left_count(chunk_end, left_end, j);
@@ -308,15 +322,23 @@ __kernel void PointBuild_large_split(const __global int *active, __global BuildN
     x_cls[1] = PointBuild_class(xr.count, x.depth + 1, max_depth);
 }
 
+__kernel void PointBuild_large_split(const __global int *active, __global BuildNode *nodes,
+                                const __global int *chunk_end, const __global int *left_end,
+                                const __global float4 *x_plane, const int child_base, const int max_depth,
+                                __global int8 *classes, const int n_active) {
+    int j = Launch_global_id();
+    if (j < n_active)
+        PointBuild_large_split_at(j, active, nodes, chunk_end, left_end, x_plane, child_base, max_depth, classes,
+                                  n_active);
+}
+
 /* Stable partition of each chunk's points to the two sides of its node's
  * partition plane (its children's, or after a cut its X's, segments). */
-__kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __global int *active,
-                                  const __global BuildNode *nodes, const __global float4 *x_plane,
-                                  const __global float4 *pts, __global float4 *out,
-                                  const __global int *chunk_left, const __global int *left_end,
-                                  const __global int *chunk_end, const int n_active) {
-    int c = Launch_global_id();
-    if (c >= PointBuild_chunk_total(chunk_end, n_active)) return;
+inline void PointBuild_chunk_scatter_at(int c, const __global Chunk *chunks, const __global int *active,
+                                       const __global BuildNode *nodes, const __global float4 *x_plane,
+                                       const __global float4 *pts, __global float4 *out,
+                                       const __global int *chunk_left, const __global int *left_end,
+                                       const __global int *chunk_end) {
     Chunk ch = chunks[c];
     BuildNode nd = nodes[active[ch.slot]];
     int first = c - ch.rank;
@@ -333,29 +355,43 @@ __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __glo
     }
 }
 
+__kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __global int *active,
+                                  const __global BuildNode *nodes, const __global float4 *x_plane,
+                                  const __global float4 *pts, __global float4 *out,
+                                  const __global int *chunk_left, const __global int *left_end,
+                                  const __global int *chunk_end, const int n_active) {
+    int c = Launch_global_id();
+    if (c < PointBuild_chunk_total(chunk_end, n_active))
+        PointBuild_chunk_scatter_at(c, chunks, active, nodes, x_plane, pts, out, chunk_left, left_end, chunk_end);
+}
+
 /* The new nodes (base + i) into the next level's large list, with its
  * chunks (chunk_end: their inclusive scan), and the small roots' list, in
  * order, at the exclusive prefix sums of their classes. A node that
  * leaves the large stage (a small root, a leaf with points) has its points
  * copied from `from`, the array the level partitioned into, to `to`, the
  * one the next level partitions into: both hold them from then on. */
+inline void PointBuild_list_node(int id, int8 c, int8 at, const __global BuildNode *nodes,
+                                 const __global float4 *from, __global float4 *to, __global int *large,
+                                 __global int *small, __global int *chunk_end, __global Chunk *chunks) {
+    BuildNode nd = nodes[id];
+    if (c.s0) {
+        large[at.s0] = id;
+        chunk_end[at.s0] = at.s2 + c.s2;
+        PointBuild_write_chunks(chunks, at.s2, c.s2, at.s0, nd.start, nd.count);
+        return;
+    }
+    if (c.s1) small[at.s1] = id;
+    if (nd.left < 0 && nd.count > 0)
+        for (int k = nd.start; k < nd.start + nd.count; ++k) to[k] = from[k];
+}
+
 __kernel void PointBuild_lists(const __global int8 *classes, const __global int8 *scanned, const int base,
                                const int n, const __global BuildNode *nodes, const __global float4 *from,
                                __global float4 *to, __global int *large, __global int *small,
                                __global int *chunk_end, __global Chunk *chunks) {
     int i = Launch_global_id();
-    if (i >= n) return;
-    int8 c = classes[i], at = scanned[i];
-    BuildNode nd = nodes[base + i];
-    if (c.s0) {
-        large[at.s0] = base + i;
-        chunk_end[at.s0] = at.s2 + c.s2;
-        PointBuild_write_chunks(chunks, at.s2, c.s2, at.s0, nd.start, nd.count);
-        return;
-    }
-    if (c.s1) small[at.s1] = base + i;
-    if (nd.left < 0 && nd.count > 0)
-        for (int k = nd.start; k < nd.start + nd.count; ++k) to[k] = from[k];
+    if (i < n) PointBuild_list_node(base + i, classes[i], scanned[i], nodes, from, to, large, small, chunk_end, chunks);
 }
 
 /* ---- small-node stage ---------------------------------------------------- */
@@ -364,11 +400,9 @@ __kernel void PointBuild_lists(const __global int8 *classes, const __global int8
  * every candidate plane (3 axes x its points; ties ordered by index), and
  * an estimate of the radius holding k_hint points, from the box's measure
  * in as many dimensions as the points spread (radius < 0: no estimate). */
-__kernel void PointBuild_small_roots(const __global int *roots, __global BuildNode *nodes,
-                                const __global float4 *pts, __global uint *masks,
-                                __global float *radius, const float k_hint, const int n_roots) {
-    int r = Launch_global_id();
-    if (r >= n_roots) return;
+inline void PointBuild_small_root_at(int r, const __global int *roots, __global BuildNode *nodes,
+                                    const __global float4 *pts, __global uint *masks, __global float *radius,
+                                    float k_hint) {
     int id = roots[r];
     BuildNode nd = nodes[id];
     int n = nd.count;
@@ -426,18 +460,22 @@ __kernel void PointBuild_small_roots(const __global int *roots, __global BuildNo
     radius[r] = est;
 }
 
+__kernel void PointBuild_small_roots(const __global int *roots, __global BuildNode *nodes,
+                                const __global float4 *pts, __global uint *masks,
+                                __global float *radius, const float k_hint, const int n_roots) {
+    int r = Launch_global_id();
+    if (r < n_roots) PointBuild_small_root_at(r, roots, nodes, pts, masks, radius, k_hint);
+}
+
 /* Per active small node: the candidate plane of least VVH cost
  *   C_t + (n_L (V_L grown by R) + n_R (V_R grown by R)) / (V grown by R);
  * boxes differ only along the split axis, so the volumes reduce to lengths.
  * The node splits when the cost is below its point count (the cost of
  * scanning it as a leaf); cand = 1 + the chosen point's index, 0 for a leaf. */
-__kernel void PointBuild_small_decide(const __global int *active, __global BuildNode *nodes,
-                                 const __global float4 *pts, const __global uint *masks,
-                                 const float radius, const float cost_traverse,
-                                 const int max_depth, __global int *split_flag,
-                                 __global int *cand, const int n_active) {
-    int j = Launch_global_id();
-    if (j >= n_active) return;
+inline void PointBuild_small_decide_at(int j, const __global int *active, __global BuildNode *nodes,
+                                      const __global float4 *pts, const __global uint *masks, float radius,
+                                      float cost_traverse, int max_depth, __global int *split_flag,
+                                      __global int *cand) {
     int id = active[j];
     BuildNode nd = nodes[id];
     int n = popcount(nd.mask);
@@ -477,16 +515,22 @@ __kernel void PointBuild_small_decide(const __global int *active, __global Build
     cand[j] = best_j;
 }
 
+__kernel void PointBuild_small_decide(const __global int *active, __global BuildNode *nodes,
+                                 const __global float4 *pts, const __global uint *masks,
+                                 const float radius, const float cost_traverse,
+                                 const int max_depth, __global int *split_flag,
+                                 __global int *cand, const int n_active) {
+    int j = Launch_global_id();
+    if (j < n_active)
+        PointBuild_small_decide_at(j, active, nodes, pts, masks, radius, cost_traverse, max_depth, split_flag, cand);
+}
+
 /* Children of the splitting small nodes (indices into the active list) at
  * child_base + 2 j: the masks of both sides and the cell cut at the plane.
  * Every child is active on the next level (small_decide makes leaves). */
-__kernel void PointBuild_small_split(const __global int *splitting, const __global int *active,
-                                __global BuildNode *nodes, const __global int *cand,
-                                const __global uint *masks, const int child_base,
-                                __global int *next_active, const int n_split) {
-    int j = Launch_global_id();
-    if (j >= n_split) return;
-    int slot = splitting[j];
+inline void PointBuild_small_split_at(int j, int slot, const __global int *active, __global BuildNode *nodes,
+                                     const __global int *cand, const __global uint *masks, int child_base,
+                                     __global int *next_active) {
     int id = active[slot];
     BuildNode nd = nodes[id];
     uint lm = masks[(size_t)nd.root * 3 * POINT_BUILD_SMALL + nd.axis * POINT_BUILD_SMALL + cand[slot]] & nd.mask;
@@ -500,6 +544,14 @@ __kernel void PointBuild_small_split(const __global int *splitting, const __glob
     PointBuild_store_children(nodes, id, child_base + 2 * j, l, r, nd.depth);
     next_active[2 * j] = child_base + 2 * j;
     next_active[2 * j + 1] = child_base + 2 * j + 1;
+}
+
+__kernel void PointBuild_small_split(const __global int *splitting, const __global int *active,
+                                __global BuildNode *nodes, const __global int *cand,
+                                const __global uint *masks, const int child_base,
+                                __global int *next_active, const int n_split) {
+    int j = Launch_global_id();
+    if (j < n_split) PointBuild_small_split_at(j, splitting[j], active, nodes, cand, masks, child_base, next_active);
 }
 
 /* ---- output stage -------------------------------------------------------- */
@@ -559,14 +611,10 @@ inline void PointBuild_node_sums(int id, const __global BuildNode *nodes, const 
 /* Bottom-up over one batch of nodes (their children live in later
  * batches, but for the children of cut-off parts X, ids x_first to x_end
  * - 1, which the same pass made: X's work item does them first). */
-__kernel void PointBuild_sums(const __global BuildNode *nodes, const __global float4 *pts,
-                         const __global float4 *power, const __global float4 *dir,
-                         const __global float4 *normal, const int has_photons,
-                         __global int *size, __global BuildSums *sums, const int base,
-                         const int n, const int x_first, const int x_end) {
-    int i = Launch_global_id();
-    if (i >= n) return;
-    int id = base + i;
+inline void PointBuild_sums_at(int id, const __global BuildNode *nodes, const __global float4 *pts,
+                               const __global float4 *power, const __global float4 *dir,
+                               const __global float4 *normal, int has_photons, __global int *size,
+                               __global BuildSums *sums, int x_first, int x_end) {
     int left = nodes[id].left;
     if (nodes[id].count < 0) return; /* a hole */
     if (left >= x_first && left < x_end) {
@@ -574,6 +622,15 @@ __kernel void PointBuild_sums(const __global BuildNode *nodes, const __global fl
         PointBuild_node_sums(left + 1, nodes, pts, power, dir, normal, has_photons, size, sums);
     }
     PointBuild_node_sums(id, nodes, pts, power, dir, normal, has_photons, size, sums);
+}
+
+__kernel void PointBuild_sums(const __global BuildNode *nodes, const __global float4 *pts,
+                         const __global float4 *power, const __global float4 *dir,
+                         const __global float4 *normal, const int has_photons,
+                         __global int *size, __global BuildSums *sums, const int base,
+                         const int n, const int x_first, const int x_end) {
+    int i = Launch_global_id();
+    if (i < n) PointBuild_sums_at(base + i, nodes, pts, power, dir, normal, has_photons, size, sums, x_first, x_end);
 }
 
 /* Preorder address and first point of both children of node id (inner). */
@@ -589,12 +646,8 @@ inline void PointBuild_child_order(int id, int left, const __global BuildNode *n
  * points of every inner node (the root's are 0, set by the host), and of
  * the children of X's children (ids x_first to x_end - 1: made in the same
  * pass, so in no batch of their own). */
-__kernel void PointBuild_preorder(const __global BuildNode *nodes, const __global int *size,
-                             __global int *addr, __global int *first, const int base,
-                             const int n, const int x_first, const int x_end) {
-    int i = Launch_global_id();
-    if (i >= n) return;
-    int id = base + i;
+inline void PointBuild_preorder_at(int id, const __global BuildNode *nodes, const __global int *size,
+                                   __global int *addr, __global int *first, int x_first, int x_end) {
     int left = nodes[id].left;
     if (left < 0) return;
     PointBuild_child_order(id, left, nodes, size, addr, first);
@@ -605,20 +658,23 @@ __kernel void PointBuild_preorder(const __global BuildNode *nodes, const __globa
     }
 }
 
+__kernel void PointBuild_preorder(const __global BuildNode *nodes, const __global int *size,
+                             __global int *addr, __global int *first, const int base,
+                             const int n, const int x_first, const int x_end) {
+    int i = Launch_global_id();
+    if (i < n) PointBuild_preorder_at(base + i, nodes, size, addr, first, x_first, x_end);
+}
+
 /* Every node to its preorder slot: the traversal node, the payload with
  * E~_p = max(0, n_p . sum_i w_i Phi_i) / r_p^2 (r_p the largest extent of the
  * tight box, at least `radius`), and a leaf's points (and photon
  * attributes) to leaf order. */
-__kernel void PointBuild_emit(const __global BuildNode *nodes, const __global BuildSums *sums,
-                         const __global int *addr, const __global int *first,
-                         const __global float4 *pts, const __global float4 *power,
-                         const __global float4 *dir, const __global float4 *normal,
-                         const int has_photons, const float radius, __global KdNode *out_nodes,
-                         __global PointNode *out_info, __global float4 *out_pts,
-                         __global float4 *out_power, __global float4 *out_dir,
-                         __global float4 *out_normal, const int n) {
-    int id = Launch_global_id();
-    if (id >= n) return;
+inline void PointBuild_emit_at(int id, const __global BuildNode *nodes, const __global BuildSums *sums,
+                               const __global int *addr, const __global int *first, const __global float4 *pts,
+                               const __global float4 *power, const __global float4 *dir,
+                               const __global float4 *normal, int has_photons, float radius,
+                               __global KdNode *out_nodes, __global PointNode *out_info, __global float4 *out_pts,
+                               __global float4 *out_power, __global float4 *out_dir, __global float4 *out_normal) {
     BuildNode nd = nodes[id];
     if (nd.count < 0) return; /* a hole */
     BuildSums s = sums[id];
@@ -668,4 +724,161 @@ __kernel void PointBuild_emit(const __global BuildNode *nodes, const __global Bu
     info.depth = nd.depth;
     info.pad = 0;
     out_info[at] = info;
+}
+
+__kernel void PointBuild_emit(const __global BuildNode *nodes, const __global BuildSums *sums,
+                         const __global int *addr, const __global int *first,
+                         const __global float4 *pts, const __global float4 *power,
+                         const __global float4 *dir, const __global float4 *normal,
+                         const int has_photons, const float radius, __global KdNode *out_nodes,
+                         __global PointNode *out_info, __global float4 *out_pts,
+                         __global float4 *out_power, __global float4 *out_dir,
+                         __global float4 *out_normal, const int n) {
+    int id = Launch_global_id();
+    if (id < n)
+        PointBuild_emit_at(id, nodes, sums, addr, first, pts, power, dir, normal, has_photons, radius, out_nodes,
+                           out_info, out_pts, out_power, out_dir, out_normal);
+}
+
+/* ---- the whole build in one work-item ------------------------------------ */
+
+/* Slots of the batch list: the root's, one a level (a level deepens every
+ * node it keeps, so there are at most POINT_TREE_MAX_DEPTH of each stage). */
+#define BUILD_SERIAL_BATCHES (2 * POINT_TREE_MAX_DEPTH + 2)
+
+/* The median of the finite, positive values among v[0..n), which it
+ * reorders (an insertion sort of those, in front); 0 where there is none. */
+inline float PointBuild_median_estimate(__global float *v, int n) {
+    int m = 0;
+    for (int i = 0; i < n; ++i) {
+        float e = v[i];
+        if (!(isfinite(e) && e > 0.0f)) continue;
+        int k = m++;
+        while (k > 0 && v[k - 1] > e) {
+            v[k] = v[k - 1];
+            k--;
+        }
+        v[k] = e;
+    }
+    if (m == 0) return 0.0f;
+    return m % 2 ? v[m / 2] : (v[m / 2 - 1] + v[m / 2]) / 2.0f;
+}
+
+/* The build of point_tree_build.py (_Build) by one work-item: its level
+ * loops, scans and list building run here in order, calling the steps the
+ * launched build runs per node and per chunk, so that the node table, its
+ * batches and the tree are the same bit for bit. For small point sets on a
+ * CPU device, where each launch of the level-by-level build costs far more
+ * than its work. The root is in nodes[0] and the points in work[0..n) (n >
+ * 1). Scratch, in the host's layout (_SerialBuild): `ints` holds the active
+ * large nodes and their chunk_end (L each), chunk_left and left_end (B
+ * each), the small roots, the small stage's flags, candidates and two
+ * active lists (n each), then size, addr and first (capacity each); `f4`
+ * x_plane (L), chunk_lo and chunk_hi (B). result: 0 or 1 when the node
+ * table (capacity) or the batch list ran out of room, then the node count,
+ * large and small levels, small roots and the radius (float bits). */
+__kernel void PointBuild_serial(const int n, const int L, const int B, const int capacity, const float empty_ratio,
+                                const int max_depth, const float k_hint, const float given_radius,
+                                const float cost_traverse, __global BuildNode *nodes, __global float4 *work,
+                                __global float4 *scratch, __global Chunk *chunks, __global int8 *classes,
+                                __global int *ints, __global float4 *f4, __global uint *masks,
+                                __global float *root_radius, __global int4 *batches, __global BuildSums *sums,
+                                const int has_photons, const __global float4 *power, const __global float4 *dir,
+                                const __global float4 *normal, __global KdNode *out_nodes,
+                                __global PointNode *out_info, __global float4 *out_pts, __global float4 *out_power,
+                                __global float4 *out_dir, __global float4 *out_normal, __global int *result) {
+    if (Launch_global_id() != 0) return;
+    __global int *active = ints, *chunk_end = active + L, *chunk_left = chunk_end + L, *left_end = chunk_left + B;
+    __global int *roots = left_end + B, *flag = roots + n, *cand = flag + n, *small_a = cand + n;
+    __global int *small_b = small_a + n, *size = small_b + n, *addr = size + capacity, *first = addr + capacity;
+    __global float4 *x_plane = f4, *chunk_lo = x_plane + L, *chunk_hi = chunk_lo + B;
+    int count = 1, n_batches = 1, n_roots = 0, large_levels = 0, small_levels = 0;
+    batches[0] = (int4)(0, 1, 0, 0);
+    result[0] = 1;
+    /* large-node stage (_Build.large_stage) */
+    int n_active = 0;
+    if (n > POINT_BUILD_SMALL) {
+        n_active = 1;
+        active[0] = 0;
+        chunk_end[0] = (n + POINT_BUILD_CHUNK - 1) / POINT_BUILD_CHUNK;
+        PointBuild_write_chunks(chunks, 0, chunk_end[0], 0, nodes[0].start, nodes[0].count);
+    } else {
+        roots[n_roots++] = 0;
+    }
+    while (n_active) {
+        large_levels++;
+        int total = PointBuild_chunk_total(chunk_end, n_active), fresh = 4 * n_active;
+        if (count + fresh > capacity || n_batches == BUILD_SERIAL_BATCHES) return;
+        for (int c = 0; c < total; ++c) PointBuild_chunk_bounds_at(c, chunks, work, chunk_lo, chunk_hi);
+        for (int j = 0; j < n_active; ++j)
+            PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth, x_plane);
+        int run = 0;
+        for (int c = 0; c < total; ++c) {
+            chunk_left[c] = PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, work);
+            run += chunk_left[c];
+            left_end[c] = run;
+        }
+        int base = count;
+        count += fresh;
+        for (int j = 0; j < n_active; ++j)
+            PointBuild_large_split_at(j, active, nodes, chunk_end, left_end, x_plane, base, max_depth, classes, n_active);
+        for (int c = 0; c < total; ++c)
+            PointBuild_chunk_scatter_at(c, chunks, active, nodes, x_plane, work, scratch, chunk_left, left_end, chunk_end);
+        __global float4 *swap = work;
+        work = scratch;
+        scratch = swap;
+        batches[n_batches++] = (int4)(base, 2 * n_active, base + 2 * n_active, base + fresh);
+        /* the next level's lists at the classes' exclusive prefix sums (the
+         * lists of this level are read no more) */
+        int8 at = (int8)(0);
+        for (int i = 0; i < fresh; ++i) {
+            int8 c = classes[i];
+            PointBuild_list_node(base + i, c, at, nodes, work, scratch, active, roots + n_roots, chunk_end, chunks);
+            at += c;
+        }
+        n_roots += at.s1;
+        n_active = at.s0;
+    }
+    /* small-node stage (_Build.small_stage) */
+    for (int r = 0; r < n_roots; ++r) PointBuild_small_root_at(r, roots, nodes, work, masks, root_radius, k_hint);
+    float radius = given_radius >= 0.0f ? given_radius : PointBuild_median_estimate(root_radius, n_roots);
+    __global int *act = roots, *next = small_a;
+    n_active = n_roots;
+    while (n_active) {
+        small_levels++;
+        for (int j = 0; j < n_active; ++j)
+            PointBuild_small_decide_at(j, act, nodes, work, masks, radius, cost_traverse, max_depth, flag, cand);
+        int n_split = 0;
+        for (int j = 0; j < n_active; ++j)
+            if (flag[j]) flag[n_split++] = j;
+        if (!n_split) break;
+        if (count + 2 * n_split > capacity || n_batches == BUILD_SERIAL_BATCHES) return;
+        int base = count;
+        count += 2 * n_split;
+        for (int j = 0; j < n_split; ++j) PointBuild_small_split_at(j, flag[j], act, nodes, cand, masks, base, next);
+        batches[n_batches++] = (int4)(base, 2 * n_split, 0, 0);
+        act = next;
+        next = next == small_a ? small_b : small_a;
+        n_active = 2 * n_split;
+    }
+    /* output stage (_Build.output_stage) */
+    for (int b = n_batches - 1; b >= 0; --b) {
+        int4 t = batches[b];
+        for (int i = 0; i < t.y; ++i)
+            PointBuild_sums_at(t.x + i, nodes, work, power, dir, normal, has_photons, size, sums, t.z, t.w);
+    }
+    for (int i = 0; i < count; ++i) addr[i] = first[i] = 0;
+    for (int b = 0; b < n_batches; ++b) {
+        int4 t = batches[b];
+        for (int i = 0; i < t.y; ++i) PointBuild_preorder_at(t.x + i, nodes, size, addr, first, t.z, t.w);
+    }
+    for (int id = 0; id < count; ++id)
+        PointBuild_emit_at(id, nodes, sums, addr, first, work, power, dir, normal, has_photons, radius, out_nodes,
+                           out_info, out_pts, out_power, out_dir, out_normal);
+    result[0] = 0;
+    result[1] = size[0];
+    result[2] = large_levels;
+    result[3] = small_levels;
+    result[4] = n_roots;
+    result[5] = as_int(radius);
 }

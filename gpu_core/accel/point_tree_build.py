@@ -12,6 +12,12 @@ once:
 * output stage: sums bottom-up (sizes, photon power, positions), preorder
   addresses top-down, then the traversal nodes, the node payloads
   (``PointNode``) and the points in leaf order.
+
+On a CPU device a small point set (up to SERIAL_MAX points) is built by one
+work-item instead (``PointBuild_serial``): the same steps in the same order,
+so the same tree bit for bit, in one launch and one read where the levels
+take about a hundred launches and a dozen reads, which cost far more than
+their work there.
 """
 
 from __future__ import annotations
@@ -31,6 +37,12 @@ from ..device.timer import StageTimer
 
 EMPTY_RATIO = 0.1  # empty fraction of a cell that is cut off, retuned for points
 COST_TRAVERSE = 3.0  # VVH cost of visiting a node, in point tests (kNN fastest at 3 on photon maps)
+SERIAL_MAX = 16384  # largest point set one work-item builds on a CPU device
+SERIAL_BATCHES = 2 * MAX_DEPTH + 2  # BUILD_SERIAL_BATCHES
+# node table of the one work-item build: SERIAL_ROOM slots a point and SERIAL_SLACK more (measured: at
+# most half a slot a point on clouds, walls, lines, planes and tight clusters); it falls back when full
+SERIAL_ROOM = 1.0
+SERIAL_SLACK = 256
 PROGRAM = "accel/point_tree_build.cl"
 
 
@@ -43,6 +55,7 @@ class BuildParams:
     cost_traverse: float = COST_TRAVERSE
     empty_ratio: float = EMPTY_RATIO
     max_depth: int = MAX_DEPTH
+    serial_max: int | None = None  # largest set built by one work-item; None: SERIAL_MAX on a CPU device, else 0
 
 
 @dataclass
@@ -92,7 +105,8 @@ class _Build:
     the other one a level partitions into) and the batches of nodes made per
     level (children after parents)."""
 
-    def __init__(self, device: Device, points: cla.Array, photons: tuple | None, params: BuildParams):
+    def __init__(self, device: Device, points: cla.Array, photons: tuple | None, params: BuildParams,
+                 capacity: int | None = None):
         self.device = device
         self.params = params
         n = self.n = len(points)
@@ -101,7 +115,7 @@ class _Build:
         self.scratch = cla.empty_like(self.work)
         self.has_photons = np.int32(photons is not None and n > 0)
         self.photons = list(photons) if self.has_photons else [device.array(4, np.float32) for _ in range(3)]
-        self.table = _NodeTable(device, 2 * max(n, 1) // 8 + 64)
+        self.table = _NodeTable(device, capacity or 2 * max(n, 1) // 8 + 64)
         self.table.reserve(1)
         root = np.zeros(1, BUILD_NODE_DTYPE)
         root["lo"], root["hi"] = np.inf, -np.inf
@@ -258,6 +272,11 @@ def build(device: Device, points: cla.Array, photons: tuple | None, params: Buil
     each point's index in w (see points_on_device); ``photons`` is
     ``(power, direction, normal)`` as (N, 4) float32 device arrays indexed
     by that index, or None. The arrays are not modified."""
+    serial_max = params.serial_max if params.serial_max is not None else (SERIAL_MAX if device.is_cpu else 0)
+    if 2 <= len(points) <= serial_max:
+        built = _serial_build(device, points, photons, params)
+        if built is not None:
+            return built
     timer = StageTimer(device.queue)
     state = _Build(device, points, photons, params)
     with timer.stage("large"):
@@ -275,3 +294,45 @@ def build(device: Device, points: cla.Array, photons: tuple | None, params: Buil
         nodes=out_nodes, info=out_info, points=out_pts,
         power=out_ph[0] if with_photons else None, direction=out_ph[1] if with_photons else None,
         normal=out_ph[2] if with_photons else None, node_count=state.node_count, radius=state.radius, stats=stats)
+
+
+def _serial_build(device: Device, points: cla.Array, photons: tuple | None, params: BuildParams) -> BuiltTree | None:
+    """The build by one work-item (PointBuild_serial), with room for the
+    nodes of a usual tree; None when it needs more (the level-by-level
+    build then runs)."""
+    timer = StageTimer(device.queue)
+    with timer.stage("serial"):
+        n, i32, f32 = len(points), np.int32, np.float32
+        state = _Build(device, points, photons, params, capacity=int(SERIAL_ROOM * n) + SERIAL_SLACK)
+        nodes = state.table.array
+        capacity = len(nodes)
+        large = n // (SMALL_MAX + 1) + 1  # active large nodes at most: more than SMALL_MAX points each
+        bound = large + n // CHUNK_POINTS + 1  # their chunks
+        ints = device.array(2 * large + 2 * bound + 5 * n + 3 * capacity, np.int32)
+        out_nodes, out_info = device.array(capacity, KDNODE_DTYPE), device.array(capacity, POINT_NODE_DTYPE)
+        out_pts = device.array(n * 4, np.float32).reshape(n, 4)
+        out_ph = [device.array(n * 4, np.float32).reshape(n, 4) for _ in range(3)]
+        result = device.array(8, np.int32)
+        radius = -1.0 if params.radius is None else max(float(params.radius), 0.0)
+        state.launch("PointBuild_serial", 1, i32(n), i32(large), i32(bound), i32(capacity), f32(params.empty_ratio),
+                     state.max_depth, f32(params.k_hint), f32(radius), f32(params.cost_traverse), nodes.data,
+                     state.work.data, state.scratch.data, device.array(bound, CHUNK_DTYPE).data,
+                     device.array(4 * large, cltypes.int8).data, ints.data,
+                     device.array(large + 2 * bound, cltypes.float4).data,
+                     device.array((n // 2 + 1) * 3 * SMALL_MAX, np.uint32).data, device.array(n // 2 + 1, np.float32).data,
+                     device.array(SERIAL_BATCHES, cltypes.int4).data, device.array(capacity, BUILD_SUMS_DTYPE).data,
+                     state.has_photons, *(p.data for p in state.photons), out_nodes.data, out_info.data, out_pts.data,
+                     *(p.data for p in out_ph), result.data)
+        status, node_count, large_levels, small_levels, n_roots, radius_bits = device.get(result)[:6]
+    if status:
+        return None
+    if params.radius is None:  # estimated on the device (a given one is kept as given, as _vvh_radius does)
+        radius = float(np.int32(radius_bits).view(np.float32))
+    stats = {"points": n, "nodes": int(node_count), "large_levels": int(large_levels),
+             "small_levels": int(small_levels), "small_roots": int(n_roots), "radius": radius, "ms": timer.ms}
+    with_photons = photons is not None
+    return BuiltTree(
+        nodes=out_nodes[:node_count], info=out_info[:node_count], points=out_pts,
+        power=out_ph[0] if with_photons else None, direction=out_ph[1] if with_photons else None,
+        normal=out_ph[2] if with_photons else None, node_count=int(node_count), radius=radius, stats=stats)
+

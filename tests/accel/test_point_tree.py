@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from layout_probe import host_layout, probe
+from gpu_core.accel import point_tree_build
 from gpu_core.accel.point_tree import PointTree
 
 
@@ -45,10 +46,16 @@ CLOUDS = {
 }
 
 
+# the two builds: one work-item (small sets on a CPU device) and level by level
+BUILDS = {"one work-item": 1 << 20, "level by level": 0}
+
+
+@pytest.mark.parametrize("build", sorted(BUILDS))
 @pytest.mark.parametrize("name", sorted(CLOUDS))
-def test_knn_matches_brute_force(device, name):
+def test_knn_matches_brute_force(device, name, build):
     points = CLOUDS[name].astype(np.float32)
-    tree = PointTree.build(device, points)
+    tree = PointTree.build(device, points, serial_max=BUILDS[build])
+    assert ("serial" in tree.stats["ms"]) == (build == "one work-item")
     queries = np.concatenate([RNG.random((150, 3)), points[:50]]).astype(np.float32)
     for k in (1, 8, 50):
         check_knn(tree, points, queries, k)
@@ -91,20 +98,92 @@ def test_bad_arguments_raise(device):
         PointTree.build(device, np.array([[0, 0, np.nan]], np.float32))
 
 
-def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
-    """The host learns each level's list sizes from one read (the chunk
-    counts stay on the device); add one for the VVH radius estimates and
-    one for the node count (the node table has unused slots)."""
+def count_reads(device, monkeypatch) -> list:
+    """A list that grows by one at every read from the device."""
     reads = []
     for name in ("to_host", "get"):
         original = getattr(type(device), name)
         monkeypatch.setattr(type(device), name, lambda self, *a, _f=original, **k: (reads.append(1), _f(self, *a, **k))[1])
+    return reads
+
+
+def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
+    """The host learns each level's list sizes from one read (the chunk
+    counts stay on the device); add one for the VVH radius estimates and
+    one for the node count (the node table has unused slots)."""
+    reads = count_reads(device, monkeypatch)
     points = CLOUDS["clustered"].astype(np.float32)
-    tree = PointTree.build(device, points)
+    tree = PointTree.build(device, points, serial_max=0)
     levels = tree.stats["large_levels"] + tree.stats["small_levels"]
     assert tree.stats["large_levels"] >= 3
     assert len(reads) <= levels + 2
     check_knn(tree, points, RNG.random((50, 3)).astype(np.float32), 8)
+
+
+def test_the_one_work_item_build_reads_back_once(device, monkeypatch):
+    reads = count_reads(device, monkeypatch)
+    tree = PointTree.build(device, CLOUDS["clustered"].astype(np.float32), serial_max=1 << 20)
+    assert tree.stats["large_levels"] >= 3 and len(reads) == 1
+
+
+def photon_cloud(kind: str, n: int) -> tuple:
+    """n points of a kind with photon power, directions and normals."""
+    rng = np.random.default_rng(n)
+    points = rng.random((n, 3))
+    if kind == "walls":  # photons on the six walls of a box
+        points[np.arange(n), rng.integers(0, 3, n)] = rng.integers(0, 2, n)
+    elif kind == "repeated":
+        points[: n * 9 // 10] = points[0]
+    elif kind == "clusters":
+        points = rng.normal(size=(n, 3)) * 1e-4 + rng.integers(0, 50, (n, 1))
+    directions = rng.normal(size=(n, 3))
+    return tuple(a.astype(np.float32) for a in (points, rng.random((n, 3)), directions, -directions))
+
+
+def built_arrays(tree: PointTree) -> dict:
+    """Everything a build leaves on the device, as host arrays."""
+    built = tree._built
+    names = ("nodes", "info", "points", "power", "direction", "normal")
+    return {name: getattr(built, name).get() for name in names if getattr(built, name) is not None}
+
+
+def assert_same_tree(a: PointTree, b: PointTree) -> None:
+    """The same nodes, payloads, point order and build statistics, bit for bit."""
+    keys = ("nodes", "large_levels", "small_levels", "small_roots", "radius")
+    assert {k: a.stats[k] for k in keys} == {k: b.stats[k] for k in keys}
+    arrays_a, arrays_b = built_arrays(a), built_arrays(b)
+    assert arrays_a.keys() == arrays_b.keys()
+    for name in arrays_a:
+        assert arrays_a[name].tobytes() == arrays_b[name].tobytes(), name
+
+
+@pytest.mark.parametrize("kind", ["walls", "repeated", "clusters"])
+@pytest.mark.parametrize("n", [2, 32, 33, 1000, 5000])
+def test_the_one_work_item_build_makes_the_level_by_level_tree(device, kind, n):
+    """The same steps in the same order: the same tree bit for bit, with and
+    without photons, with the radius estimated or given."""
+    points, power, directions, normals = photon_cloud(kind, n)
+    for photons, radius in (((power, directions, normals), None), ((None, None, None), 0.05)):
+        trees = [PointTree.build(device, points, *photons, k_hint=20, radius=radius, serial_max=m)
+                 for m in (1 << 20, 0)]
+        assert "serial" in trees[0].stats["ms"] and "serial" not in trees[1].stats["ms"]
+        assert_same_tree(*trees)
+
+
+def test_the_one_work_item_build_falls_back_when_its_node_table_is_full(device, monkeypatch):
+    points, power, directions, normals = photon_cloud("walls", 3000)
+    wanted = PointTree.build(device, points, power, directions, normals, serial_max=0)
+    monkeypatch.setattr(point_tree_build, "SERIAL_ROOM", 0.0)
+    monkeypatch.setattr(point_tree_build, "SERIAL_SLACK", 40)
+    tree = PointTree.build(device, points, power, directions, normals, serial_max=1 << 20)
+    assert "serial" not in tree.stats["ms"]
+    assert_same_tree(tree, wanted)
+
+
+def test_only_a_cpu_device_builds_small_sets_in_one_work_item(device):
+    points = photon_cloud("walls", point_tree_build.SERIAL_MAX + 1)[0]
+    assert ("serial" in PointTree.build(device, points[:-1]).stats["ms"]) == device.is_cpu
+    assert "serial" not in PointTree.build(device, points).stats["ms"]
 
 
 def test_node_payloads_sum_their_photons(device):
