@@ -102,13 +102,17 @@ __kernel void KdBuild_init(const __global float4 *verts, const int n,
 /* ---- large-node stage --------------------------------------------------- */
 
 /* Chunk -> node map: node i owns chunks chunk_base[i] .. + ceil(count/KD_CHUNK). */
+inline void KdBuild_chunk_nodes_at(int i, const __global int4 *act_info, const __global int *chunk_base,
+                                   __global int *chunk_node) {
+    int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
+    for (int k = 0; k < chunks; ++k) chunk_node[chunk_base[i] + k] = i;
+}
+
 __kernel void KdBuild_chunk_nodes(const __global int4 *act_info,
                                   const __global int *chunk_base, const int n,
                                   __global int *chunk_node) {
     int i = Launch_global_id();
-    if (i >= n) return;
-    int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
-    for (int k = 0; k < chunks; ++k) chunk_node[chunk_base[i] + k] = i;
+    if (i < n) KdBuild_chunk_nodes_at(i, act_info, chunk_base, chunk_node);
 }
 
 /* The elements [*begin, *end) of chunk c and its node. */
@@ -119,6 +123,23 @@ inline int KdBuild_chunk_range(const __global int4 *act_info, const __global int
     *begin = info.x + (c - chunk_base[node]) * KD_CHUNK;
     *end = min(*begin + KD_CHUNK, info.x + info.y);
     return node;
+}
+
+/* Bounds of the elements lid, lid + size, ... of chunk c (in *lo, *hi),
+ * each tagged with its node. */
+inline void KdBuild_chunk_lane(int c, int lid, int size, const __global int4 *act_info,
+                               const __global int *chunk_base, const __global int *chunk_node,
+                               const __global float4 *el_lo, const __global float4 *el_hi, __global int *el_node,
+                               float4 *lo, float4 *hi) {
+    int begin, end;
+    int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);
+    *lo = (float4)(INFINITY);
+    *hi = (float4)(-INFINITY);
+    for (int e = begin + lid; e < end; e += size) {
+        *lo = fmin(*lo, el_lo[e]);
+        *hi = fmax(*hi, el_hi[e]);
+        el_node[e] = node;
+    }
 }
 
 /* Bounds of each chunk's elements; also tags elements with their node.
@@ -143,14 +164,8 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
     int c = Launch_group_id(), lid = get_local_id(0), size = get_local_size(0);
     if (c >= chunk_total[0]) return; /* the whole group */
 #endif
-    int begin, end;
-    int node = KdBuild_chunk_range(act_info, chunk_base, chunk_node, c, &begin, &end);
-    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
-    for (int e = begin + lid; e < end; e += size) {
-        lo = fmin(lo, el_lo[e]);
-        hi = fmax(hi, el_hi[e]);
-        el_node[e] = node;
-    }
+    float4 lo, hi;
+    KdBuild_chunk_lane(c, lid, size, act_info, chunk_base, chunk_node, el_lo, el_hi, el_node, &lo, &hi);
 #if KD_CHUNK_LANES == 1
     chunk_lo[c] = lo;
     chunk_hi[c] = hi;
@@ -176,16 +191,10 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
  * a node being contiguous), clipped to its cell; then the plane. A side
  * with more than KD_EMPTY_RATIO of the cell empty is cut off first;
  * otherwise the longest axis of the bounds is split at its middle. */
-__kernel void KdBuild_large_split(const __global float4 *act_lo,
-                                  const __global float4 *act_hi,
-                                  const __global int4 *act_info,
-                                  const __global int *chunk_base,
-                                  const __global float4 *chunk_lo,
-                                  const __global float4 *chunk_hi, const int n,
-                                  __global float *node_split,
-                                  __global int *node_mode) {
-    int i = Launch_global_id();
-    if (i >= n) return;
+inline void KdBuild_large_split_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
+                                   const __global int4 *act_info, const __global int *chunk_base,
+                                   const __global float4 *chunk_lo, const __global float4 *chunk_hi,
+                                   __global float *node_split, __global int *node_mode) {
     int first = chunk_base[i];
     int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
     float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
@@ -237,26 +246,29 @@ __kernel void KdBuild_large_split(const __global float4 *act_lo,
     node_mode[i] = axis | (kind << 2);
 }
 
+__kernel void KdBuild_large_split(const __global float4 *act_lo,
+                                  const __global float4 *act_hi,
+                                  const __global int4 *act_info,
+                                  const __global int *chunk_base,
+                                  const __global float4 *chunk_lo,
+                                  const __global float4 *chunk_hi, const int n,
+                                  __global float *node_split,
+                                  __global int *node_mode) {
+    int i = Launch_global_id();
+    if (i < n) KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, node_split, node_mode);
+}
+
 /* Per element: the sides of its node's plane it goes to (packed as
  * below | above << 32 for the scan) and its bounds on each side. A
  * straddling triangle is clipped to each side's box widened by eps, and
  * dropped from a side it does not reach. Elements of an unsplit node all
  * go "below", to the node's own leaf. */
-__kernel void KdBuild_large_classify(const __global float4 *verts,
-                                     const __global int *el_tri,
-                                     const __global float4 *el_lo,
-                                     const __global float4 *el_hi,
-                                     const __global int *el_node,
-                                     const __global float *node_split,
-                                     const __global int *node_mode,
-                                     const int n, const float eps,
-                                     __global long *flags,
-                                     __global float4 *below_lo,
-                                     __global float4 *below_hi,
-                                     __global float4 *above_lo,
-                                     __global float4 *above_hi) {
-    int e = Launch_global_id();
-    if (e >= n) return;
+inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const __global int *el_tri,
+                                      const __global float4 *el_lo, const __global float4 *el_hi,
+                                      const __global int *el_node, const __global float *node_split,
+                                      const __global int *node_mode, float eps, __global long *flags,
+                                      __global float4 *below_lo, __global float4 *below_hi,
+                                      __global float4 *above_lo, __global float4 *above_hi) {
     int node = el_node[e];
     int mode = node_mode[node];
     int axis = mode & 3, kind = mode >> 2;
@@ -298,6 +310,25 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
     flags[e] = (long)(sides & 1) | ((long)(sides >> 1) << 32);
 }
 
+__kernel void KdBuild_large_classify(const __global float4 *verts,
+                                     const __global int *el_tri,
+                                     const __global float4 *el_lo,
+                                     const __global float4 *el_hi,
+                                     const __global int *el_node,
+                                     const __global float *node_split,
+                                     const __global int *node_mode,
+                                     const int n, const float eps,
+                                     __global long *flags,
+                                     __global float4 *below_lo,
+                                     __global float4 *below_hi,
+                                     __global float4 *above_lo,
+                                     __global float4 *above_hi) {
+    int e = Launch_global_id();
+    if (e < n)
+        KdBuild_large_classify_at(e, verts, el_tri, el_lo, el_hi, el_node, node_split, node_mode, eps, flags, below_lo,
+                                  below_hi, above_lo, above_hi);
+}
+
 /* Whether a large child of node `info` becomes a leaf: at the depth limit,
  * when the level's element budget is spent (force_leaf), or past
  * KD_BAD_SPLITS median splits in a row without progress (`bad`). */
@@ -317,19 +348,11 @@ inline bool KdBuild_split_pays(const __global float4 *act_lo, const __global flo
  * nodes, small roots, new records, 0, 0). A child is an empty leaf when it
  * has no element, a small root with at most KD_SMALL, a leaf by
  * KdBuild_large_leaf, else a large node. */
-__kernel void KdBuild_large_children(const __global float4 *act_lo,
-                                     const __global float4 *act_hi,
-                                     const __global int4 *act_info,
-                                     const __global float *node_split,
-                                     const __global int *node_mode,
-                                     const __global long *flag_scan,
-                                     const __global long *flag_total,
-                                     const int n_el, const int n,
-                                     const int max_depth, const int force_leaf,
-                                     __global int2 *node_counts,
-                                     __global int8 *counters) {
-    int i = Launch_global_id();
-    if (i >= n) return;
+inline void KdBuild_large_children_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
+                                      const __global int4 *act_info, const __global float *node_split,
+                                      const __global int *node_mode, const __global long *flag_scan,
+                                      const __global long *flag_total, int n_el, int max_depth, int force_leaf,
+                                      __global int2 *node_counts, __global int8 *counters) {
     int4 info = act_info[i];
     int end = info.x + info.y;
     long sum = (end < n_el ? flag_scan[end] : flag_total[0]) - flag_scan[info.x];
@@ -359,24 +382,35 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
     counters[i] = c;
 }
 
+__kernel void KdBuild_large_children(const __global float4 *act_lo,
+                                     const __global float4 *act_hi,
+                                     const __global int4 *act_info,
+                                     const __global float *node_split,
+                                     const __global int *node_mode,
+                                     const __global long *flag_scan,
+                                     const __global long *flag_total,
+                                     const int n_el, const int n,
+                                     const int max_depth, const int force_leaf,
+                                     __global int2 *node_counts,
+                                     __global int8 *counters) {
+    int i = Launch_global_id();
+    if (i < n)
+        KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, flag_scan, flag_total, n_el,
+                                  max_depth, force_leaf, node_counts, counters);
+}
+
 /* Per node: writes its record, its children's records, cells and depth,
  * the next level's large nodes and the new small roots, and where each
  * child's elements go (dest: kind below, base below, kind above, base
  * above). Bases are the exclusive scan of the counters plus the level's
  * offsets into the growing arrays. */
-__kernel void KdBuild_large_emit(
-    const __global float4 *act_lo, const __global float4 *act_hi,
-    const __global int4 *act_info, const __global float *node_split,
-    const __global int *node_mode, const __global int2 *node_counts,
-    const __global int8 *counter_scan, const int n, const int max_depth,
-    const int force_leaf, const int rec_base, const int root_base,
-    const int small_el_base, const int leaf_base, __global float4 *rec_lo,
-    __global float4 *rec_hi, __global int4 *rec_info, __global float *rec_split,
-    __global float4 *next_lo, __global float4 *next_hi,
-    __global int4 *next_info, __global int4 *small_roots,
+inline void KdBuild_large_emit_at(
+    int i, const __global float4 *act_lo, const __global float4 *act_hi, const __global int4 *act_info,
+    const __global float *node_split, const __global int *node_mode, const __global int2 *node_counts,
+    const __global int8 *counter_scan, int max_depth, int force_leaf, int rec_base, int root_base, int small_el_base,
+    int leaf_base, __global float4 *rec_lo, __global float4 *rec_hi, __global int4 *rec_info, __global float *rec_split,
+    __global float4 *next_lo, __global float4 *next_hi, __global int4 *next_info, __global int4 *small_roots,
     __global int4 *node_dest) {
-    int i = Launch_global_id();
-    if (i >= n) return;
     int4 info = act_info[i];
     int8 base = counter_scan[i];
     int mode = node_mode[i];
@@ -433,21 +467,33 @@ __kernel void KdBuild_large_emit(
     node_dest[i] = (int4)(dest[0], dest[1], dest[2], dest[3]);
 }
 
+__kernel void KdBuild_large_emit(
+    const __global float4 *act_lo, const __global float4 *act_hi,
+    const __global int4 *act_info, const __global float *node_split,
+    const __global int *node_mode, const __global int2 *node_counts,
+    const __global int8 *counter_scan, const int n, const int max_depth,
+    const int force_leaf, const int rec_base, const int root_base,
+    const int small_el_base, const int leaf_base, __global float4 *rec_lo,
+    __global float4 *rec_hi, __global int4 *rec_info, __global float *rec_split,
+    __global float4 *next_lo, __global float4 *next_hi,
+    __global int4 *next_info, __global int4 *small_roots,
+    __global int4 *node_dest) {
+    int i = Launch_global_id();
+    if (i < n)
+        KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_counts, counter_scan, max_depth,
+                              force_leaf, rec_base, root_base, small_el_base, leaf_base, rec_lo, rec_hi, rec_info,
+                              rec_split, next_lo, next_hi, next_info, small_roots, node_dest);
+}
+
 /* Per element: copies it to each side it goes to, at its rank among its
  * node's elements on that side: into the next level's elements, the small
  * roots' elements, or a leaf's triangle list. */
-__kernel void KdBuild_large_scatter(
-    const __global int *el_tri, const __global int *el_node,
-    const __global int4 *act_info, const __global long *flags,
-    const __global long *flag_scan, const __global float4 *below_lo,
-    const __global float4 *below_hi, const __global float4 *above_lo,
-    const __global float4 *above_hi, const __global int4 *node_dest,
-    const int n, __global int *next_tri, __global float4 *next_lo,
-    __global float4 *next_hi, __global int *small_tri,
-    __global float4 *small_lo, __global float4 *small_hi,
-    __global int *leaf_tris) {
-    int e = Launch_global_id();
-    if (e >= n) return;
+inline void KdBuild_large_scatter_at(
+    int e, const __global int *el_tri, const __global int *el_node, const __global int4 *act_info,
+    const __global long *flags, const __global long *flag_scan, const __global float4 *below_lo,
+    const __global float4 *below_hi, const __global float4 *above_lo, const __global float4 *above_hi,
+    const __global int4 *node_dest, __global int *next_tri, __global float4 *next_lo, __global float4 *next_hi,
+    __global int *small_tri, __global float4 *small_lo, __global float4 *small_hi, __global int *leaf_tris) {
     int node = el_node[e];
     long rank = flag_scan[e] - flag_scan[act_info[node].x];
     long flag = flags[e];
@@ -473,19 +519,39 @@ __kernel void KdBuild_large_scatter(
     }
 }
 
+__kernel void KdBuild_large_scatter(
+    const __global int *el_tri, const __global int *el_node,
+    const __global int4 *act_info, const __global long *flags,
+    const __global long *flag_scan, const __global float4 *below_lo,
+    const __global float4 *below_hi, const __global float4 *above_lo,
+    const __global float4 *above_hi, const __global int4 *node_dest,
+    const int n, __global int *next_tri, __global float4 *next_lo,
+    __global float4 *next_hi, __global int *small_tri,
+    __global float4 *small_lo, __global float4 *small_hi,
+    __global int *leaf_tris) {
+    int e = Launch_global_id();
+    if (e < n)
+        KdBuild_large_scatter_at(e, el_tri, el_node, act_info, flags, flag_scan, below_lo, below_hi, above_lo, above_hi,
+                                 node_dest, next_tri, next_lo, next_hi, small_tri, small_lo, small_hi, leaf_tris);
+}
+
 /* ---- small-node stage --------------------------------------------------- */
 
 /* Per small root: tags its elements with it and makes it the first small
  * node, holding all its elements. */
-__kernel void KdBuild_small_init(const __global int4 *small_roots, const int n,
-                                 __global int *sel_root, __global int2 *sn_node,
-                                 __global ulong *sn_mask) {
-    int r = Launch_global_id();
-    if (r >= n) return;
+inline void KdBuild_small_init_at(int r, const __global int4 *small_roots, __global int *sel_root,
+                                  __global int2 *sn_node, __global ulong *sn_mask) {
     int4 root = small_roots[r];
     for (int k = 0; k < root.y; ++k) sel_root[root.x + k] = r;
     sn_node[r] = (int2)(r, root.z);
     sn_mask[r] = root.y == 64 ? ~0UL : ((1UL << root.y) - 1UL);
+}
+
+__kernel void KdBuild_small_init(const __global int4 *small_roots, const int n,
+                                 __global int *sel_root, __global int2 *sn_node,
+                                 __global ulong *sn_mask) {
+    int r = Launch_global_id();
+    if (r < n) KdBuild_small_init_at(r, small_roots, sel_root, sn_node, sn_mask);
 }
 
 /* Per candidate plane (6 per small-root element: its bounds' low and high
@@ -493,13 +559,9 @@ __kernel void KdBuild_small_init(const __global int4 *small_roots, const int n,
  * Candidate 6 e + 2 axis + side comes from element e's low (side 0, low
  * rule) or high (side 1, high rule) face, so its own element lands on the
  * side it bounds. */
-__kernel void KdBuild_small_masks(const __global int4 *small_roots,
-                                  const __global int *sel_root,
-                                  const __global float4 *sel_lo,
-                                  const __global float4 *sel_hi, const int n,
-                                  __global ulong2 *cand) {
-    int c = Launch_global_id();
-    if (c >= n) return;
+inline void KdBuild_small_masks_at(int c, const __global int4 *small_roots, const __global int *sel_root,
+                                   const __global float4 *sel_lo, const __global float4 *sel_hi,
+                                   __global ulong2 *cand) {
     int e = c / 6, axis = (c % 6) >> 1, side = c & 1;
     int4 root = small_roots[sel_root[e]];
     float plane = Axis_of(side ? sel_hi[e] : sel_lo[e], axis);
@@ -513,6 +575,15 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
         above |= (ulong)(s >> 1) << k;
     }
     cand[c] = (ulong2)(below, above);
+}
+
+__kernel void KdBuild_small_masks(const __global int4 *small_roots,
+                                  const __global int *sel_root,
+                                  const __global float4 *sel_lo,
+                                  const __global float4 *sel_hi, const int n,
+                                  __global ulong2 *cand) {
+    int c = Launch_global_id();
+    if (c < n) KdBuild_small_masks_at(c, small_roots, sel_root, sel_lo, sel_hi, cand);
 }
 
 /* The plane of candidate c (6 per element: low and high face on each axis)
@@ -568,6 +639,37 @@ inline void KdBuild_consider_element(int k, ulong mask, int4 root, float4 lo, fl
     KdBuild_consider_plane(c + 5, 2, e_hi.z, m[5], mask, lo, hi, area, best_cost, best_cand);
 }
 
+/* The share of lane `lane` (of KD_SAH_LANES) in small node i's search: its
+ * cheapest candidate and cost (-1 and infinity where none is searched) and
+ * the node's leaf cost. */
+inline void KdBuild_search(int i, int lane, const __global int2 *sn_node, const __global ulong *sn_mask,
+                           const __global int4 *small_roots, const __global float4 *rec_lo,
+                           const __global float4 *rec_hi, const __global int4 *rec_info,
+                           const __global float4 *sel_lo, const __global float4 *sel_hi,
+                           const __global ulong2 *cand, int max_depth, float *my_cost, int *my_cand,
+                           float *leaf_cost) {
+    int2 node = sn_node[i];
+    ulong mask = sn_mask[i];
+    int4 root = small_roots[node.x];
+    float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
+    float area = KdBuild_area(lo, hi);
+    *leaf_cost = (float)popcount(mask);
+    if (rec_info[node.y].w < max_depth && area > 0.0f && *leaf_cost > KD_COST_TRAVERSE) {
+#if KD_SAH_LANES == 1
+        /* the candidates of the node's elements only, lowest bit first */
+        for (ulong left = mask; left != 0UL; left &= left - 1UL)
+            KdBuild_consider_element(popcount((left & (~left + 1UL)) - 1UL), mask, root, lo, hi, area, sel_lo,
+                                     sel_hi, cand, my_cost, my_cand);
+#else
+        for (int c = lane; c < 6 * root.y; c += KD_SAH_LANES) {
+            int k = c / 6;
+            if (((mask >> k) & 1UL) != 0UL)
+                KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand, my_cost, my_cand);
+        }
+#endif
+    }
+}
+
 /* Per small node (KD_SAH_LANES work-items each, sharing its candidates):
  * the candidate inside the node's cell with the lowest SAH
  *   C_t + (N_below A_below + N_above A_above) / A,
@@ -595,29 +697,9 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
     float my_cost = INFINITY;
     int my_cand = -1;
     float leaf_cost = 0.0f;
-    if (i < n) {
-        int2 node = sn_node[i];
-        ulong mask = sn_mask[i];
-        int4 root = small_roots[node.x];
-        float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
-        float area = KdBuild_area(lo, hi);
-        leaf_cost = (float)popcount(mask);
-        if (rec_info[node.y].w < max_depth && area > 0.0f && leaf_cost > KD_COST_TRAVERSE) {
-#if KD_SAH_LANES == 1
-            /* the candidates of the node's elements only, lowest bit first */
-            for (ulong left = mask; left != 0UL; left &= left - 1UL)
-                KdBuild_consider_element(popcount((left & (~left + 1UL)) - 1UL), mask, root, lo, hi, area,
-                                         sel_lo, sel_hi, cand, &my_cost, &my_cand);
-#else
-            for (int c = lane; c < 6 * root.y; c += KD_SAH_LANES) {
-                int k = c / 6;
-                if (((mask >> k) & 1UL) != 0UL)
-                    KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand,
-                                     &my_cost, &my_cand);
-            }
-#endif
-        }
-    }
+    if (i < n)
+        KdBuild_search(i, lane, sn_node, sn_mask, small_roots, rec_lo, rec_hi, rec_info, sel_lo, sel_hi, cand,
+                       max_depth, &my_cost, &my_cand, &leaf_cost);
 #if KD_SAH_LANES > 1
     /* the node's lanes agree on the cheapest, lowest candidate */
     cost_s[lid] = my_cost;
@@ -645,18 +727,12 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
  * (masks: its mask and the candidate's); a leaf writes its record and its
  * triangles. rank packs (splits before it) | (leaf triangles before it)
  * << 32. */
-__kernel void KdBuild_small_emit(
-    const __global int2 *sn_node, const __global ulong *sn_mask,
-    const __global int *best, const __global long *rank,
-    const __global int4 *small_roots, const __global int *sel_tri,
-    const __global float4 *sel_lo, const __global float4 *sel_hi,
-    const __global ulong2 *cand, const int n, const int rec_base,
-    const int leaf_base, __global float4 *rec_lo, __global float4 *rec_hi,
-    __global int4 *rec_info, __global float *rec_split,
-    __global int2 *next_node, __global ulong *next_mask,
-    __global int *leaf_tris) {
-    int i = Launch_global_id();
-    if (i >= n) return;
+inline void KdBuild_small_emit_at(
+    int i, const __global int2 *sn_node, const __global ulong *sn_mask, const __global int *best,
+    const __global long *rank, const __global int4 *small_roots, const __global int *sel_tri,
+    const __global float4 *sel_lo, const __global float4 *sel_hi, const __global ulong2 *cand, int rec_base,
+    int leaf_base, __global float4 *rec_lo, __global float4 *rec_hi, __global int4 *rec_info, __global float *rec_split,
+    __global int2 *next_node, __global ulong *next_mask, __global int *leaf_tris) {
     int2 node = sn_node[i];
     ulong mask = sn_mask[i];
     int4 root = small_roots[node.x];
@@ -689,40 +765,59 @@ __kernel void KdBuild_small_emit(
     next_mask[2 * split + 1] = mask & m.y;
 }
 
+__kernel void KdBuild_small_emit(
+    const __global int2 *sn_node, const __global ulong *sn_mask,
+    const __global int *best, const __global long *rank,
+    const __global int4 *small_roots, const __global int *sel_tri,
+    const __global float4 *sel_lo, const __global float4 *sel_hi,
+    const __global ulong2 *cand, const int n, const int rec_base,
+    const int leaf_base, __global float4 *rec_lo, __global float4 *rec_hi,
+    __global int4 *rec_info, __global float *rec_split,
+    __global int2 *next_node, __global ulong *next_mask,
+    __global int *leaf_tris) {
+    int i = Launch_global_id();
+    if (i < n)
+        KdBuild_small_emit_at(i, sn_node, sn_mask, best, rank, small_roots, sel_tri, sel_lo, sel_hi, cand, rec_base,
+                              leaf_base, rec_lo, rec_hi, rec_info, rec_split, next_node, next_mask, leaf_tris);
+}
+
 /* ---- output stage ------------------------------------------------------- */
 
 /* Subtree sizes of records [begin, end), whose children (made later) are
  * already sized. */
+inline void KdBuild_subtree_size_at(int p, const __global int4 *rec_info, __global int *size) {
+    int4 info = rec_info[p];
+    size[p] = info.x == KD_LEAF ? 1 : 1 + size[info.y] + size[info.z];
+}
+
 __kernel void KdBuild_subtree_size(const __global int4 *rec_info,
                                    const int begin, const int end,
                                    __global int *size) {
     int p = begin + Launch_global_id();
-    if (p >= end) return;
-    int4 info = rec_info[p];
-    size[p] = info.x == KD_LEAF ? 1 : 1 + size[info.y] + size[info.z];
+    if (p < end) KdBuild_subtree_size_at(p, rec_info, size);
 }
 
 /* Preorder addresses of the children of records [begin, end), whose own
  * addresses are known: the left child follows its parent, the right
  * child follows the left subtree. */
-__kernel void KdBuild_preorder(const __global int4 *rec_info,
-                               const __global int *size, const int begin,
-                               const int end, __global int *addr) {
-    int p = begin + Launch_global_id();
-    if (p >= end) return;
+inline void KdBuild_preorder_at(int p, const __global int4 *rec_info, const __global int *size,
+                                __global int *addr) {
     int4 info = rec_info[p];
     if (info.x == KD_LEAF) return;
     addr[info.y] = addr[p] + 1;
     addr[info.z] = addr[p] + 1 + size[info.y];
 }
 
+__kernel void KdBuild_preorder(const __global int4 *rec_info,
+                               const __global int *size, const int begin,
+                               const int end, __global int *addr) {
+    int p = begin + Launch_global_id();
+    if (p < end) KdBuild_preorder_at(p, rec_info, size, addr);
+}
+
 /* Every record to its preorder KdNode. */
-__kernel void KdBuild_output(const __global int4 *rec_info,
-                             const __global float *rec_split,
-                             const __global int *addr, const int n,
-                             __global KdNode *nodes) {
-    int p = Launch_global_id();
-    if (p >= n) return;
+inline void KdBuild_output_at(int p, const __global int4 *rec_info, const __global float *rec_split,
+                              const __global int *addr, __global KdNode *nodes) {
     int4 info = rec_info[p];
     KdNode node;
     if (info.x == KD_LEAF) {
@@ -737,6 +832,14 @@ __kernel void KdBuild_output(const __global int4 *rec_info,
         node.count = 0;
     }
     nodes[addr[p]] = node;
+}
+
+__kernel void KdBuild_output(const __global int4 *rec_info,
+                             const __global float *rec_split,
+                             const __global int *addr, const int n,
+                             __global KdNode *nodes) {
+    int p = Launch_global_id();
+    if (p < n) KdBuild_output_at(p, rec_info, rec_split, addr, nodes);
 }
 
 /* ---- inputs of the host's scans and statistics ---------------------------- */
@@ -767,3 +870,175 @@ __kernel void KdBuild_statistics(const __global int4 *rec_info, const __global f
     terms[i] = (float4)((leaf ? (float)info.z : KD_COST_TRAVERSE) * KdBuild_area(rec_lo[i], rec_hi[i]), 0.0f, 0.0f, 0.0f);
     sizes[i] = leaf ? (int4)(1, info.z, info.z, info.w) : (int4)(0, 0, 0, info.w);
 }
+
+/* ---- the whole build in one work-item ------------------------------------ */
+
+#if KD_SAH_LANES == 1 && KD_CHUNK_LANES == 1
+/* The build of kdtree_build.py (_Build) after its setup, by one work-item:
+ * its level loops, scans and counters run here in order, calling the steps
+ * the launched build runs per node, chunk, element and record, so that the
+ * records, the leaf lists and the tree are the same bit for bit. For small
+ * meshes on a CPU device, where each launch of the level-by-level build
+ * costs far more than its work. `caps` are the capacities (elements, active
+ * nodes, chunks, small elements and roots, records, leaf references, small
+ * nodes, batches) of the arrays passed; a build that would outgrow one stops
+ * with result[0] = 1 (the host then builds level by level). Else result:
+ * 0, records, leaf references, small roots, small elements, large and small
+ * levels; `nodes` holds the tree. The root record and the root as the one
+ * active node (act_*[0]) are written by the host; el_* hold the elements. */
+__kernel void KdBuild_serial(
+    const __global float4 *verts, const int count, const int max_depth, const float eps, const int budget,
+    const int8 caps, __global float4 *rec_lo, __global float4 *rec_hi, __global int4 *rec_info,
+    __global float *rec_split, __global int *el_tri, __global float4 *el_lo, __global float4 *el_hi,
+    __global int *nel_tri, __global float4 *nel_lo, __global float4 *nel_hi, __global int *el_node,
+    __global long *flags, __global long *flag_scan, __global long *flag_total, __global float4 *below_lo,
+    __global float4 *below_hi, __global float4 *above_lo, __global float4 *above_hi, __global float4 *act_lo,
+    __global float4 *act_hi, __global int4 *act_info, __global float4 *nact_lo, __global float4 *nact_hi,
+    __global int4 *nact_info, __global int *chunk_base, __global float *node_split, __global int *node_mode,
+    __global int2 *node_counts, __global int8 *counters, __global int8 *counter_scan, __global int4 *node_dest,
+    __global int *chunk_node, __global float4 *chunk_lo, __global float4 *chunk_hi, __global int4 *small_roots,
+    __global int *sel_tri, __global float4 *sel_lo, __global float4 *sel_hi, __global int *sel_root,
+    __global ulong2 *cand, __global int2 *sn_node, __global ulong *sn_mask, __global int2 *nsn_node,
+    __global ulong *nsn_mask, __global int *best, __global long *rank, __global int *leaf_tris,
+    __global int2 *batches, __global int *size, __global int *addr, __global KdNode *nodes, __global int *result) {
+    if (Launch_global_id() != 0) return;
+    int rec_count = 1, leaf_count = 0, root_count = 0, small_count = 0, n_batches = 1;
+    int large_levels = 0, small_levels = 0;
+    batches[0] = (int2)(0, 1);
+    result[0] = 1;
+    /* large-node stage (_Build.large_stage): a small root stays as it is */
+    int active = 0, elements = count;
+    if (count <= KD_SMALL) {
+        for (int e = 0; e < count; ++e) {
+            sel_tri[e] = el_tri[e];
+            sel_lo[e] = el_lo[e];
+            sel_hi[e] = el_hi[e];
+        }
+        small_roots[0] = (int4)(0, count, 0, 0);
+        root_count = 1;
+        small_count = count;
+    } else {
+        active = 1;
+    }
+    while (active) {
+        large_levels++;
+        int chunks = 0;
+        for (int i = 0; i < active; ++i) {
+            chunk_base[i] = chunks;
+            chunks += (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
+        }
+        if (chunks > caps.s2) return;
+        for (int i = 0; i < active; ++i) KdBuild_chunk_nodes_at(i, act_info, chunk_base, chunk_node);
+        for (int c = 0; c < chunks; ++c) {
+            float4 lo, hi;
+            KdBuild_chunk_lane(c, 0, 1, act_info, chunk_base, chunk_node, el_lo, el_hi, el_node, &lo, &hi);
+            chunk_lo[c] = lo;
+            chunk_hi[c] = hi;
+        }
+        for (int i = 0; i < active; ++i)
+            KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, node_split, node_mode);
+        for (int e = 0; e < elements; ++e)
+            KdBuild_large_classify_at(e, verts, el_tri, el_lo, el_hi, el_node, node_split, node_mode, eps, flags,
+                                      below_lo, below_hi, above_lo, above_hi);
+        long run = 0;
+        for (int e = 0; e < elements; ++e) {
+            flag_scan[e] = run;
+            run += flags[e];
+        }
+        flag_total[0] = run;
+        /* children counts, with every node a leaf once the element budget is spent */
+        int8 total;
+        int force_leaf = 0;
+        for (; force_leaf < 2; ++force_leaf) {
+            for (int i = 0; i < active; ++i)
+                KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, flag_scan, flag_total,
+                                          elements, max_depth, force_leaf, node_counts, counters);
+            total = (int8)(0);
+            for (int i = 0; i < active; ++i) {
+                counter_scan[i] = total;
+                total += counters[i];
+            }
+            if (total.s0 <= budget) break;
+        }
+        force_leaf = min(force_leaf, 1);
+        if (total.s0 > caps.s0 || total.s3 > caps.s1 || small_count + total.s1 > caps.s3 ||
+            root_count + total.s4 > caps.s3 || rec_count + total.s5 > caps.s4 || leaf_count + total.s2 > caps.s5 ||
+            n_batches == caps.s7)
+            return;
+        for (int i = 0; i < active; ++i)
+            KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_counts, counter_scan,
+                                  max_depth, force_leaf, rec_count, root_count, small_count, leaf_count, rec_lo,
+                                  rec_hi, rec_info, rec_split, nact_lo, nact_hi, nact_info, small_roots, node_dest);
+        for (int e = 0; e < elements; ++e)
+            KdBuild_large_scatter_at(e, el_tri, el_node, act_info, flags, flag_scan, below_lo, below_hi, above_lo,
+                                     above_hi, node_dest, nel_tri, nel_lo, nel_hi, sel_tri, sel_lo, sel_hi, leaf_tris);
+        batches[n_batches++] = (int2)(rec_count, rec_count + total.s5);
+        rec_count += total.s5;
+        root_count += total.s4;
+        small_count += total.s1;
+        leaf_count += total.s2;
+        /* the children are the next level's nodes and elements */
+        __global float4 *f;
+        __global int4 *g;
+        __global int *t;
+        f = act_lo, act_lo = nact_lo, nact_lo = f;
+        f = act_hi, act_hi = nact_hi, nact_hi = f;
+        g = act_info, act_info = nact_info, nact_info = g;
+        t = el_tri, el_tri = nel_tri, nel_tri = t;
+        f = el_lo, el_lo = nel_lo, nel_lo = f;
+        f = el_hi, el_hi = nel_hi, nel_hi = f;
+        active = total.s3;
+        elements = total.s0;
+    }
+    /* small-node stage (_Build.small_stage) */
+    int small_active = root_count;
+    if (root_count > caps.s6) return;
+    for (int r = 0; r < root_count; ++r) KdBuild_small_init_at(r, small_roots, sel_root, sn_node, sn_mask);
+    for (int c = 0; c < 6 * small_count; ++c) KdBuild_small_masks_at(c, small_roots, sel_root, sel_lo, sel_hi, cand);
+    while (small_active) {
+        small_levels++;
+        for (int i = 0; i < small_active; ++i) {
+            float cost = INFINITY, leaf_cost = 0.0f;
+            int c = -1;
+            KdBuild_search(i, 0, sn_node, sn_mask, small_roots, rec_lo, rec_hi, rec_info, sel_lo, sel_hi, cand,
+                           max_depth, &cost, &c, &leaf_cost);
+            best[i] = cost < leaf_cost ? c : -1;
+        }
+        long packed = 0;
+        for (int i = 0; i < small_active; ++i) {
+            rank[i] = packed;
+            packed += best[i] >= 0 ? 1L : ((long)popcount(sn_mask[i]) << 32);
+        }
+        int splits = (int)(packed & 0xffffffffL), leaf_new = (int)(packed >> 32);
+        if (rec_count + 2 * splits > caps.s4 || leaf_count + leaf_new > caps.s5 || 2 * splits > caps.s6 ||
+            n_batches == caps.s7)
+            return;
+        for (int i = 0; i < small_active; ++i)
+            KdBuild_small_emit_at(i, sn_node, sn_mask, best, rank, small_roots, sel_tri, sel_lo, sel_hi, cand,
+                                  rec_count, leaf_count, rec_lo, rec_hi, rec_info, rec_split, nsn_node, nsn_mask,
+                                  leaf_tris);
+        batches[n_batches++] = (int2)(rec_count, rec_count + 2 * splits);
+        rec_count += 2 * splits;
+        leaf_count += leaf_new;
+        __global int2 *m = sn_node;
+        sn_node = nsn_node, nsn_node = m;
+        __global ulong *k = sn_mask;
+        sn_mask = nsn_mask, nsn_mask = k;
+        small_active = 2 * splits;
+    }
+    /* output stage (_Build.output_stage) */
+    for (int b = n_batches - 1; b >= 0; --b)
+        for (int p = batches[b].x; p < batches[b].y; ++p) KdBuild_subtree_size_at(p, rec_info, size);
+    addr[0] = 0;
+    for (int b = 0; b < n_batches; ++b)
+        for (int p = batches[b].x; p < batches[b].y; ++p) KdBuild_preorder_at(p, rec_info, size, addr);
+    for (int p = 0; p < rec_count; ++p) KdBuild_output_at(p, rec_info, rec_split, addr, nodes);
+    result[0] = 0;
+    result[1] = rec_count;
+    result[2] = leaf_count;
+    result[3] = root_count;
+    result[4] = small_count;
+    result[5] = large_levels;
+    result[6] = small_levels;
+}
+#endif

@@ -18,6 +18,11 @@ a bound and reads its own count on the device):
   cheaper;
 * output stage: subtree sizes bottom-up, preorder addresses top-down, then
   the ``KdNode`` array (device/layout.py) and the leaf triangle lists.
+
+On a CPU device a small mesh (up to SERIAL_MAX triangles) is built after the
+setup by one work-item (``KdBuild_serial``): the same steps in the same
+order, so the same tree bit for bit, in one launch and one read where the
+levels take a few hundred launches and dozens of reads.
 """
 
 from __future__ import annotations
@@ -46,6 +51,13 @@ BAD_SPLITS = 2  # median splits in a row without progress allowed before a large
 SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
 PROGRAM = "accel/kdtree_build.cl"
+SERIAL_MAX = 12288  # largest mesh one work-item builds on a CPU device (as fast as two cores' launches at ~15k)
+# room of the one work-item build, per triangle, plus SERIAL_SLACK (measured on blob meshes, the demo
+# scenes and triangle soups: at most 1.45 elements in a level, 1.9 small-root elements, 3.9 records,
+# 0.7 small nodes a level and 10.7 leaf references a triangle); it falls back when it needs more (a fan
+# of triangles around one vertex: 105 leaf references a triangle)
+SERIAL_ROOM = {"elements": 3, "small": 3, "records": 6, "leaves": 16, "small_nodes": 2}
+SERIAL_SLACK = 1024
 
 
 def depth_limit(triangle_count: int) -> int:
@@ -156,6 +168,57 @@ class _Build:
         self.el_tri, self.el_lo, self.el_hi = (dev.array(count, t) for t in (np.int32, cltypes.float4, cltypes.float4))
         self.kernel("KdBuild_init")(count, self.verts.data, np.int32(count), self.el_tri.data, self.el_lo.data,
                                     self.el_hi.data)
+
+    def serial(self) -> cla.Array | None:
+        """Everything after the setup by one work-item (KdBuild_serial):
+        the node array, with the records, leaves and counts as the launched
+        build leaves them; None when the build needs more room than
+        SERIAL_ROOM gives (nothing is then usable but the setup's inputs)."""
+        dev, count, i32 = self.device, self.count, np.int32
+        room = {name: per * count + SERIAL_SLACK for name, per in SERIAL_ROOM.items()}
+        room["elements"] = max(room["elements"], count)  # the first level's
+        el_cap, sel_cap, rec_cap, leaf_cap, sn_cap = (room[k] for k in ("elements", "small", "records", "leaves",
+                                                                         "small_nodes"))
+        act_cap = el_cap // (SMALL + 1) + 2  # large nodes hold more than SMALL elements each
+        chunk_cap = act_cap + el_cap // CHUNK + 1
+        batch_cap = 2 * self.max_depth + 4  # each level deepens what it keeps
+        caps = np.array([(el_cap, act_cap, chunk_cap, sel_cap, rec_cap, leaf_cap, sn_cap, batch_cap)],
+                        cltypes.int8)[0]
+        for grow in (self.rec_lo, self.rec_hi, self.rec_info, self.rec_split):
+            grow.reserve(rec_cap)
+        for grow in (self.sel_tri, self.sel_lo, self.sel_hi):
+            grow.reserve(sel_cap)
+        self.small_roots.reserve(sel_cap)
+        self.leaf_tris.reserve(leaf_cap)
+        f4, i4, i8 = cltypes.float4, cltypes.int4, cltypes.int8
+        elements = [dev.array(el_cap, t) for t in (np.int32, f4, f4)]
+        for have, room_ in zip((self.el_tri, self.el_lo, self.el_hi), elements):
+            dev.copy(room_.data, have.data, have.nbytes)
+        active = [dev.array(act_cap, t) for t in (f4, f4, i4)]
+        dev.write(active[0].data, self.lo)
+        dev.write(active[1].data, self.hi)
+        dev.write(active[2].data, np.array([0, count, 0, 0], np.int32))
+        nodes, result = dev.array(rec_cap, KDNODE_DTYPE), dev.array(8, np.int32)
+        arrays = [
+            self.rec_lo, self.rec_hi, self.rec_info, self.rec_split, *elements,
+            *(dev.array(el_cap, t) for t in (np.int32, f4, f4, np.int32, np.int64, np.int64)), dev.array(1, np.int64),
+            *(dev.array(el_cap, f4) for _ in range(4)), *active, *(dev.array(act_cap, t) for t in (f4, f4, i4)),
+            *(dev.array(act_cap, t) for t in (np.int32, np.float32, np.int32, cltypes.int2, i8, i8, i4)),
+            *(dev.array(chunk_cap, t) for t in (np.int32, f4, f4)), self.small_roots, self.sel_tri, self.sel_lo,
+            self.sel_hi, dev.array(sel_cap, np.int32), dev.array(6 * sel_cap, cltypes.ulong2),
+            *(dev.array(sn_cap, t) for t in (cltypes.int2, np.uint64, cltypes.int2, np.uint64, np.int32, np.int64)),
+            self.leaf_tris, dev.array(batch_cap, cltypes.int2), dev.array(rec_cap, np.int32),
+            dev.array(rec_cap, np.int32), nodes, result,
+        ]
+        budget = ELEMENT_BUDGET * count + 65536
+        self.kernel("KdBuild_serial")(1, self.verts.data, i32(count), i32(self.max_depth), self.eps, i32(budget), caps,
+                                      *(a.data for a in arrays))
+        status, *counts = (int(v) for v in dev.get(result)[:7])
+        if status:
+            return None
+        (self.rec_count, self.leaf_count, self.root_count, self.small_count, self.large_levels,
+         self.small_levels) = counts
+        return nodes[: self.rec_count]
 
     def large_stage(self) -> None:
         """Median splits and empty-space cuts, level by level, until every
@@ -338,24 +401,37 @@ class _Build:
 
 
 def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None,
-               should_stop: Callable[[], bool] | None = None) -> BuildOutput:
+               should_stop: Callable[[], bool] | None = None, serial_max: int | None = None) -> BuildOutput:
     """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
 
     ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
     per node of the SAH search; by default 1 on a CPU, else ``SAH_GROUP``.
     The tree is the same whatever it is. ``should_stop`` is polled after
-    every level (RenderCancelled).
+    every level (RenderCancelled). ``serial_max``: the largest mesh built by
+    one work-item (with one-lane searches only); None: SERIAL_MAX on a CPU
+    device, else 0.
     """
     build = _Build(device, verts, count, sah_lanes, should_stop)
     timer = build.timer
     with timer.stage("setup"):
         build.setup()
-    with timer.stage("large"):
-        build.large_stage()
-    with timer.stage("small"):
-        build.small_stage()
-    with timer.stage("output"):
-        nodes = build.output_stage()
+    limit = serial_max if serial_max is not None else (SERIAL_MAX if device.is_cpu else 0)
+    nodes = None
+    if 0 < count <= limit and build.config.sah_lanes == 1 and build.config.chunk_lanes == 1:
+        with timer.stage("serial"):
+            nodes = build.serial()
+        if nodes is None:  # out of room: the launched build, from a fresh setup
+            build = _Build(device, verts, count, sah_lanes, should_stop)
+            timer = build.timer
+            with timer.stage("setup"):
+                build.setup()
+    if nodes is None:
+        with timer.stage("large"):
+            build.large_stage()
+        with timer.stage("small"):
+            build.small_stage()
+        with timer.stage("output"):
+            nodes = build.output_stage()
     stats = build.statistics()
     stats["ms"] = timer.ms
     bmin = (build.lo - build.eps).astype(np.float32)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pyopencl import cltypes
 
-from gpu_core.accel import kdtree
+from gpu_core.accel import kdtree, kdtree_build
 from gpu_core.accel.kdtree_build import BAD_SPLITS, COST_TRAVERSE, SAH_GROUP, SMALL, build_tree, depth_limit
 
 MARGIN = 1e-5  # leaf cells shrink by this fraction of the scene size before the overlap test
@@ -288,7 +288,8 @@ def test_sah_cost_matches_the_cells_of_the_walk(built):
 def test_stats_time_every_build_stage(built):
     _, tree = built
     ms = tree.stats["ms"]
-    for stage in ("upload", "setup", "large", "small", "output", "total"):
+    one_item = ("serial",) if "serial" in ms else ("large", "small", "output")
+    for stage in ("upload", "setup", *one_item, "total"):
         assert ms[stage] >= 0.0, stage
     stages = sum(v for k, v in ms.items() if k != "total")
     assert ms["total"] >= stages * (1 - 1e-6)
@@ -340,15 +341,56 @@ def test_leaves_stay_small_where_triangles_are_separable(device):
     assert stats["leaf_references"] <= 2 * len(tris)
 
 
+def device_verts(device, tris):
+    """The corners of ``tris`` (N, 3, 3) as the device's float4 array, and N."""
+    corners = tris.reshape(-1, 3)
+    verts = np.zeros((len(corners), 4), np.float32)
+    verts[:, :3] = corners
+    return device.array_from(verts.view(cltypes.float4).reshape(-1)), len(corners) // 3
+
+
+def assert_same_tree(a, b):
+    """The same node array, leaf lists and statistics (times aside)."""
+    assert np.array_equal(a.nodes.get(), b.nodes.get())
+    used = a.stats["leaf_references"]
+    assert np.array_equal(a.leaf_tris.get()[:used], b.leaf_tris.get()[:used])
+    assert {k: v for k, v in a.stats.items() if k != "ms"} == {k: v for k, v in b.stats.items() if k != "ms"}
+
+
 @pytest.mark.parametrize("lanes", [8, SAH_GROUP])
 def test_sah_search_makes_the_same_tree_with_any_lane_count(device, lanes):
     # the CPU searches a node's candidates in one work-item, a GPU in a work-group
-    tris = box_grid(4).reshape(-1, 3)
-    verts = np.zeros((len(tris), 4), np.float32)
-    verts[:, :3] = tris
-    verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
-    reference = build_tree(device, verts_dev, len(tris) // 3, sah_lanes=1)
-    other = build_tree(device, verts_dev, len(tris) // 3, sah_lanes=lanes)
-    assert np.array_equal(other.nodes.get(), reference.nodes.get())
-    used = reference.stats["leaf_references"]
-    assert np.array_equal(other.leaf_tris.get()[:used], reference.leaf_tris.get()[:used])
+    verts_dev, count = device_verts(device, box_grid(4))
+    reference = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=0)
+    other = build_tree(device, verts_dev, count, sah_lanes=lanes)
+    assert "serial" not in other.stats["ms"]  # one work-item searches with one lane only
+    assert_same_tree(other, reference)
+
+
+@pytest.mark.parametrize("name", sorted(SCENES) + ["one_triangle", "small_root", "one_above"])
+def test_the_one_work_item_build_makes_the_level_by_level_tree(device, name):
+    """The same steps in the same order: the same records, tree and leaf
+    lists bit for bit."""
+    extra = {"one_triangle": lambda: random_soup(1, seed=7), "small_root": lambda: random_soup(SMALL, seed=8),
+             "one_above": lambda: random_soup(SMALL + 1, seed=9)}
+    verts_dev, count = device_verts(device, {**SCENES, **extra}[name]())
+    serial = build_tree(device, verts_dev, count, serial_max=1 << 30, sah_lanes=1)
+    launched = build_tree(device, verts_dev, count, serial_max=0, sah_lanes=1)
+    assert "serial" in serial.stats["ms"] and "serial" not in launched.stats["ms"]
+    assert_same_tree(serial, launched)
+
+
+@pytest.mark.parametrize("room", ["elements", "small", "records", "leaves", "small_nodes"])
+def test_the_one_work_item_build_falls_back_when_it_outgrows_its_room(device, monkeypatch, room):
+    monkeypatch.setitem(kdtree_build.SERIAL_ROOM, room, 0)
+    monkeypatch.setattr(kdtree_build, "SERIAL_SLACK", 40)
+    verts_dev, count = device_verts(device, random_soup(1000, seed=11))
+    tree = build_tree(device, verts_dev, count, serial_max=1 << 30, sah_lanes=1)
+    assert "serial" not in tree.stats["ms"]
+    assert_same_tree(tree, build_tree(device, verts_dev, count, serial_max=0, sah_lanes=1))
+
+
+def test_only_a_cpu_device_builds_small_meshes_in_one_work_item(device):
+    tris = random_soup(kdtree_build.SERIAL_MAX + 1, seed=10, size=0.001)
+    assert ("serial" in kdtree.build(device, tris[:-1]).stats["ms"]) == device.is_cpu
+    assert "serial" not in kdtree.build(device, tris).stats["ms"]
