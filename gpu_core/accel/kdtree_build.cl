@@ -873,7 +873,7 @@ __kernel void KdBuild_statistics(const __global int4 *rec_info, const __global f
 
 /* ---- the whole build in one work-item ------------------------------------ */
 
-#if KD_SAH_LANES == 1 && KD_CHUNK_LANES == 1
+#if KD_SAH_LANES == 1
 /* The build of kdtree_build.py (_Build) after its setup, by one work-item:
  * its level loops, scans and counters run here in order, calling the steps
  * the launched build runs per node, chunk, element and record, so that the

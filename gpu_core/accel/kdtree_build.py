@@ -173,7 +173,8 @@ class _Build:
         """Everything after the setup by one work-item (KdBuild_serial):
         the node array, with the records, leaves and counts as the launched
         build leaves them; None when the build needs more room than
-        SERIAL_ROOM gives (nothing is then usable but the setup's inputs)."""
+        SERIAL_ROOM gives (its records are then spoilt: build again from a
+        fresh setup)."""
         dev, count, i32 = self.device, self.count, np.int32
         room = {name: per * count + SERIAL_SLACK for name, per in SERIAL_ROOM.items()}
         room["elements"] = max(room["elements"], count)  # the first level's
@@ -192,13 +193,16 @@ class _Build:
         self.leaf_tris.reserve(leaf_cap)
         f4, i4, i8 = cltypes.float4, cltypes.int4, cltypes.int8
         elements = [dev.array(el_cap, t) for t in (np.int32, f4, f4)]
-        for have, room_ in zip((self.el_tri, self.el_lo, self.el_hi), elements):
-            dev.copy(room_.data, have.data, have.nbytes)
+        for have, wide in zip((self.el_tri, self.el_lo, self.el_hi), elements):
+            dev.copy(wide.data, have.data, have.nbytes)
         active = [dev.array(act_cap, t) for t in (f4, f4, i4)]
         dev.write(active[0].data, self.lo)
         dev.write(active[1].data, self.hi)
         dev.write(active[2].data, np.array([0, count, 0, 0], np.int32))
         nodes, result = dev.array(rec_cap, KDNODE_DTYPE), dev.array(8, np.int32)
+        # in KdBuild_serial's order: records, elements (two sets), element work arrays, active nodes (two
+        # sets), node work arrays, chunks, small roots and elements, candidates, small nodes (two sets),
+        # leaves, batches, subtree sizes, addresses, the nodes and the result
         arrays = [
             self.rec_lo, self.rec_hi, self.rec_info, self.rec_split, *elements,
             *(dev.array(el_cap, t) for t in (np.int32, f4, f4, np.int32, np.int64, np.int64)), dev.array(1, np.int64),
@@ -408,8 +412,8 @@ def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int |
     per node of the SAH search; by default 1 on a CPU, else ``SAH_GROUP``.
     The tree is the same whatever it is. ``should_stop`` is polled after
     every level (RenderCancelled). ``serial_max``: the largest mesh built by
-    one work-item (with one-lane searches only); None: SERIAL_MAX on a CPU
-    device, else 0.
+    one work-item (where a node's SAH search has one lane); None: SERIAL_MAX
+    on a CPU device, else 0.
     """
     build = _Build(device, verts, count, sah_lanes, should_stop)
     timer = build.timer
@@ -417,7 +421,7 @@ def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int |
         build.setup()
     limit = serial_max if serial_max is not None else (SERIAL_MAX if device.is_cpu else 0)
     nodes = None
-    if 0 < count <= limit and build.config.sah_lanes == 1 and build.config.chunk_lanes == 1:
+    if 0 < count <= limit and build.config.sah_lanes == 1:
         with timer.stage("serial"):
             nodes = build.serial()
         if nodes is None:  # out of room: the launched build, from a fresh setup

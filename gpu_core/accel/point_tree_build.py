@@ -289,11 +289,7 @@ def build(device: Device, points: cla.Array, photons: tuple | None, params: Buil
         "points": state.n, "nodes": state.node_count, "large_levels": state.large_levels,
         "small_levels": state.small_levels, "small_roots": state.n_roots, "radius": state.radius, "ms": timer.ms,
     }
-    with_photons = photons is not None
-    return BuiltTree(
-        nodes=out_nodes, info=out_info, points=out_pts,
-        power=out_ph[0] if with_photons else None, direction=out_ph[1] if with_photons else None,
-        normal=out_ph[2] if with_photons else None, node_count=state.node_count, radius=state.radius, stats=stats)
+    return _built(out_nodes, out_info, out_pts, out_ph if photons is not None else None, stats)
 
 
 def _serial_build(device: Device, points: cla.Array, photons: tuple | None, params: BuildParams) -> BuiltTree | None:
@@ -330,9 +326,12 @@ def _serial_build(device: Device, points: cla.Array, photons: tuple | None, para
         radius = float(np.int32(radius_bits).view(np.float32))
     stats = {"points": n, "nodes": int(node_count), "large_levels": int(large_levels),
              "small_levels": int(small_levels), "small_roots": int(n_roots), "radius": radius, "ms": timer.ms}
-    with_photons = photons is not None
-    return BuiltTree(
-        nodes=out_nodes[:node_count], info=out_info[:node_count], points=out_pts,
-        power=out_ph[0] if with_photons else None, direction=out_ph[1] if with_photons else None,
-        normal=out_ph[2] if with_photons else None, node_count=int(node_count), radius=radius, stats=stats)
+    return _built(out_nodes[:node_count], out_info[:node_count], out_pts, out_ph if photons is not None else None,
+                  stats)
 
+
+def _built(nodes: cla.Array, info: cla.Array, points: cla.Array, photons: list | None, stats: dict) -> BuiltTree:
+    """The finished tree of a build's output arrays (photons: power, direction, normal, or None)."""
+    power, direction, normal = photons if photons is not None else (None, None, None)
+    return BuiltTree(nodes=nodes, info=info, points=points, power=power, direction=direction, normal=normal,
+                     node_count=stats["nodes"], radius=stats["radius"], stats=stats)
