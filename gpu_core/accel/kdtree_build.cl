@@ -255,7 +255,8 @@ __kernel void KdBuild_large_split(const __global float4 *act_lo,
                                   __global float *node_split,
                                   __global int *node_mode) {
     int i = Launch_global_id();
-    if (i < n) KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, node_split, node_mode);
+    if (i < n)
+        KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, node_split, node_mode);
 }
 
 /* Per element: the sides of its node's plane it goes to (packed as

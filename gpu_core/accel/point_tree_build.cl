@@ -811,7 +811,8 @@ __kernel void PointBuild_serial(const int n, const int L, const int B, const int
         if (count + fresh > capacity || n_batches == BUILD_SERIAL_BATCHES) return;
         for (int c = 0; c < total; ++c) PointBuild_chunk_bounds_at(c, chunks, work, chunk_lo, chunk_hi);
         for (int j = 0; j < n_active; ++j)
-            PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth, x_plane);
+            PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth,
+                                       x_plane);
         int run = 0;
         for (int c = 0; c < total; ++c) {
             chunk_left[c] = PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, work);
@@ -821,9 +822,11 @@ __kernel void PointBuild_serial(const int n, const int L, const int B, const int
         int base = count;
         count += fresh;
         for (int j = 0; j < n_active; ++j)
-            PointBuild_large_split_at(j, active, nodes, chunk_end, left_end, x_plane, base, max_depth, classes, n_active);
+            PointBuild_large_split_at(j, active, nodes, chunk_end, left_end, x_plane, base, max_depth, classes,
+                                      n_active);
         for (int c = 0; c < total; ++c)
-            PointBuild_chunk_scatter_at(c, chunks, active, nodes, x_plane, work, scratch, chunk_left, left_end, chunk_end);
+            PointBuild_chunk_scatter_at(c, chunks, active, nodes, x_plane, work, scratch, chunk_left, left_end,
+                                        chunk_end);
         __global float4 *swap = work;
         work = scratch;
         scratch = swap;

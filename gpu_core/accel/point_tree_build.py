@@ -315,7 +315,8 @@ def _serial_build(device: Device, points: cla.Array, photons: tuple | None, para
                      state.work.data, state.scratch.data, device.array(bound, CHUNK_DTYPE).data,
                      device.array(4 * large, cltypes.int8).data, ints.data,
                      device.array(large + 2 * bound, cltypes.float4).data,
-                     device.array((n // 2 + 1) * 3 * SMALL_MAX, np.uint32).data, device.array(n // 2 + 1, np.float32).data,
+                     device.array((n // 2 + 1) * 3 * SMALL_MAX, np.uint32).data,
+                     device.array(n // 2 + 1, np.float32).data,
                      device.array(SERIAL_BATCHES, cltypes.int4).data, device.array(capacity, BUILD_SUMS_DTYPE).data,
                      state.has_photons, *(p.data for p in state.photons), out_nodes.data, out_info.data, out_pts.data,
                      *(p.data for p in out_ph), result.data)
