@@ -878,7 +878,8 @@ __kernel void KdBuild_statistics(const __global int4 *rec_info, const __global f
 /* The build of kdtree_build.py (_Build) after its setup, by one work-item:
  * its level loops, scans and counters run here in order, calling the steps
  * the launched build runs per node, chunk, element and record, so that the
- * records, the leaf lists and the tree are the same bit for bit. For small
+ * records, the leaf lists and the tree are the same bit for bit (its SAH
+ * searches take one lane, so it exists where KD_SAH_LANES is 1). For small
  * meshes on a CPU device, where each launch of the level-by-level build
  * costs far more than its work. `caps` are the capacities (elements, active
  * nodes, chunks, small elements and roots, records, leaf references, small

@@ -770,7 +770,7 @@ inline float PointBuild_median_estimate(__global float *v, int n) {
  * batches and the tree are the same bit for bit. For small point sets on a
  * CPU device, where each launch of the level-by-level build costs far more
  * than its work. The root is in nodes[0] and the points in work[0..n) (n >
- * 1). Scratch, in the host's layout (_SerialBuild): `ints` holds the active
+ * 1). Scratch, in the host's layout (_serial_build): `ints` holds the active
  * large nodes and their chunk_end (L each), chunk_left and left_end (B
  * each), the small roots, the small stage's flags, candidates and two
  * active lists (n each), then size, addr and first (capacity each); `f4`
