@@ -261,9 +261,10 @@ __kernel void KdBuild_large_split(const __global float4 *act_lo,
 
 /* Per element: the sides of its node's plane it goes to (packed as
  * below | above << 32 for the scan) and its bounds on each side. A
- * straddling triangle is clipped to each side's box widened by eps, and
- * dropped from a side it does not reach. Elements of an unsplit node all
- * go "below", to the node's own leaf. */
+ * straddling triangle is clipped to its element's box once, that polygon
+ * to each side of the plane widened by eps, and the triangle dropped from
+ * a side it does not reach. Elements of an unsplit node all go "below",
+ * to the node's own leaf. */
 inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const __global int *el_tri,
                                       const __global float4 *el_lo, const __global float4 *el_hi,
                                       const __global int *el_node, const __global float *node_split,
@@ -289,14 +290,15 @@ inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const
         float4 widen = (float4)(eps, eps, eps, 0.0f);
         float4 box_hi = Axis_with(hi, axis, plane + eps);
         float4 box_lo = Axis_with(lo, axis, plane - eps);
-        float4 clo, chi;
+        float4 clo, chi, cell[KD_CLIP_MAX + 1];
+        int corners = KdClip_triangle(v0, v1, v2, lo, hi, cell);
         int kept = 0;
-        if (KdClip_triangle(v0, v1, v2, lo, box_hi, &clo, &chi)) {
+        if (KdClip_side_bounds(cell, corners, axis, plane + eps, -1.0f, &clo, &chi)) {
             below_lo[e] = fmax(clo - widen, lo);
             below_hi[e] = fmin(chi + widen, box_hi);
             kept |= 1;
         }
-        if (KdClip_triangle(v0, v1, v2, box_lo, hi, &clo, &chi)) {
+        if (KdClip_side_bounds(cell, corners, axis, plane - eps, 1.0f, &clo, &chi)) {
             above_lo[e] = fmax(clo - widen, box_lo);
             above_hi[e] = fmin(chi + widen, hi);
             kept |= 2;
