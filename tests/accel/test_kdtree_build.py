@@ -394,3 +394,69 @@ def test_only_a_cpu_device_builds_small_meshes_in_one_work_item(device):
     tris = random_soup(kdtree_build.SERIAL_MAX + 1, seed=10, size=0.001)
     assert ("serial" in kdtree.build(device, tris[:-1]).stats["ms"]) == device.is_cpu
     assert "serial" not in kdtree.build(device, tris).stats["ms"]
+
+
+def clip_polygon(poly: list, axis: int, plane: float, keep_below: bool) -> list:
+    """Sutherland-Hodgman in float64: the part of ``poly`` with x[axis] <=
+    plane (keep_below) or >= plane."""
+    out = []
+    for i, a in enumerate(poly):
+        b = poly[(i + 1) % len(poly)]
+        da, db = (plane - a[axis], plane - b[axis]) if keep_below else (a[axis] - plane, b[axis] - plane)
+        if da >= 0:
+            out.append(a)
+        if (da >= 0) != (db >= 0):
+            out.append(a + da / (da - db) * (b - a))
+    return out
+
+
+def test_a_straddling_triangle_gets_the_bounds_of_its_clipped_part_on_each_side(device):
+    """KdBuild_large_classify against float64 clipping: each side's bounds
+    are those of the triangle inside its element's box and past the plane
+    widened by eps (then widened by eps), and a side it does not reach is
+    dropped."""
+    rng = np.random.default_rng(5)
+    n, eps = 400, 1e-4
+    tris = rng.uniform(-1.0, 1.0, (n, 3, 3))
+    # each element's box: a random box overlapping its triangle's bounds
+    t_lo, t_hi = tris.min(axis=1), tris.max(axis=1)
+    lo = t_lo + rng.uniform(0.0, 0.4, (n, 3)) * (t_hi - t_lo)
+    hi = t_hi - rng.uniform(0.0, 0.4, (n, 3)) * (t_hi - t_lo)
+    axis = rng.integers(0, 3, n)
+    rows = np.arange(n)
+    plane = lo[rows, axis] + rng.uniform(0.2, 0.8, n) * (hi[rows, axis] - lo[rows, axis])
+    verts_dev, _ = device_verts(device, tris.astype(np.float32))
+    float4 = lambda a: device.to_device(np.concatenate([a, np.zeros((n, 1))], 1).astype(np.float32))
+    out = [device.empty(16 * n) for _ in range(4)]
+    flags = device.empty(8 * n)
+    defines = kdtree_build._Config(device, None).defines
+    device.kernel(kdtree_build.PROGRAM, "KdBuild_large_classify", defines)(
+        n, verts_dev.data, device.to_device(rows.astype(np.int32)), float4(lo), float4(hi),
+        device.to_device(rows.astype(np.int32)), device.to_device(plane.astype(np.float32)),
+        device.to_device(axis.astype(np.int32)), np.int32(n), np.float32(eps), flags, *out)
+    below_lo, below_hi, above_lo, above_hi = (device.read(b, (n, 4), np.float32)[:, :3] for b in out)
+    sides = device.read(flags, n, np.int64)
+    checked = 0
+    for e in range(n):
+        cell = [v for v in tris[e]]
+        for a in range(3):
+            cell = clip_polygon(clip_polygon(cell, a, lo[e, a], False), a, hi[e, a], True)
+        parts = [clip_polygon(cell, axis[e], plane[e] + eps, True), clip_polygon(cell, axis[e], plane[e] - eps, False)]
+        # how far each side's part reaches from its cut: a sliver, float32 may see either way
+        depth = [plane[e] + eps - min(p[axis[e]] for p in parts[0]) if parts[0] else 1.0,
+                 max(p[axis[e]] for p in parts[1]) - (plane[e] - eps) if parts[1] else 1.0]
+        if not cell or min(depth) < 1e-3:
+            continue
+        assert sides[e] == (1 if parts[0] else 0) + ((1 << 32) if parts[1] else 0)
+        side_box = [(lo[e], np.where(np.arange(3) == axis[e], plane[e] + eps, hi[e])),
+                    (np.where(np.arange(3) == axis[e], plane[e] - eps, lo[e]), hi[e])]
+        got = [(below_lo, below_hi), (above_lo, above_hi)]
+        for part, (box_lo, box_hi), (got_lo, got_hi) in zip(parts, side_box, got):
+            if part:
+                want_lo = np.maximum(np.min(part, axis=0) - eps, box_lo)
+                want_hi = np.minimum(np.max(part, axis=0) + eps, box_hi)
+                np.testing.assert_allclose(got_lo[e], want_lo, atol=2e-5)
+                np.testing.assert_allclose(got_hi[e], want_hi, atol=2e-5)
+        checked += 1
+    assert checked > n // 2
+    assert 0 < np.count_nonzero(sides != 1 + (1 << 32)) < n // 4  # some keep one side only
