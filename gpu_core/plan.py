@@ -26,7 +26,7 @@ from .image import programs as image_programs
 from .photons import reweight as photon_reweight
 from .photons import trace as photon_trace
 from .photons.emit import Emitter, emitter_powers, maps_needed, reweight_scales
-from .accel import kdtree_build, kdtree_overlay
+from .accel import kdtree_blocks, kdtree_build, kdtree_overlay
 from .device.primitives import programs as primitives_programs
 from .scene.model import PARTS, Scene, part_digests
 from .scene.tables import SceneTables, scene_tables
@@ -288,6 +288,7 @@ def _gi_stages(maps: dict[str, str], photons: str, cache_reused: bool, records_r
 # device bytes per item, generous estimates (the kd-tree's own arrays vary with the scene)
 _TRIANGLE_BYTES = 48 + 48 + 24 + 4 + 4 * 8 + 16  # corners, normals, uvs, material, leaf references and nodes
 _TANGENT_BYTES = 48  # corner tangents, where a scene has them
+_BLOCK_BYTES = 2 * kdtree_blocks.BLOCK_BYTES  # leaf blocks (on a CPU device; 1.3-2.0 a triangle measured)
 _STORED_PHOTON_BYTES = 4 * 16 + 4 * 16 + 16  # trace buffers, tree points and attributes, a node share
 _GRID_SLOT_BYTES = 4 * 16 + 16 + 16 + 8 + 4 + 16 + 24  # grid, compacted point, cache work arrays
 
@@ -300,7 +301,8 @@ def _device_bytes(scene: Scene, settings: RenderSettings, the_plan: Plan) -> tup
     window = scene.camera.pixel_window
     film = film_bytes(window, settings)
     per_triangle = _TRIANGLE_BYTES + (_TANGENT_BYTES if len(scene.tangents) else 0)
-    need = n * per_triangle + texels + film + tables.lights.nbytes + tables.materials.nbytes
+    need = n * per_triangle + min(n * _BLOCK_BYTES, kdtree_blocks.MAX_BYTES) + texels + film + tables.lights.nbytes \
+        + tables.materials.nbytes
     largest = max(n * 48, texels, film)
     if settings.mode == "gi":
         x0, y0, x1, y1 = window
@@ -322,7 +324,7 @@ def _programs(device, settings: RenderSettings, the_plan: Plan) -> list[tuple[st
     (they are built from the start, in that order)."""
     wanted = primitives_programs()
     if "kdtree" in the_plan.stages or "kdtree_overlay" in the_plan.stages:
-        wanted += kdtree_build.programs(device)
+        wanted += kdtree_build.programs(device) + (kdtree_blocks.programs() if kdtree_blocks.wanted(device) else [])
     if "kdtree_overlay" in the_plan.stages:
         wanted += kdtree_overlay.programs()
     if settings.mode == "gi":

@@ -23,6 +23,7 @@ from ..device.layout import KDNODE_DTYPE as NODE_DTYPE
 from ..device.layout import float4_rows
 from ..device.timer import StageTimer
 from ..errors import SceneError
+from . import kdtree_blocks
 from .kdtree_build import build_tree
 
 __all__ = ["KdTree", "build", "LEAF", "MAX_DEPTH", "NODE_DTYPE", "SELF_HIT_SCALE"]
@@ -49,10 +50,12 @@ class KdTree:
     triangle_count: int
     stats: dict = field(default_factory=dict)
     base: KdTree | None = None  # an overlay tree's base (kdtree_overlay.py); None for a tree built whole
+    blocks: cla.Array | None = None  # leaf blocks (kdtree_blocks.py), or None: triangles tested one at a time
 
     def kernel_args(self) -> list:
         """Arguments matching KDTREE_PARAMS in accel/kdtree.h, in order."""
-        return [self.nodes.data, self.leaf_tris.data, self.verts.data, self.bmin, self.bmax]
+        blocks = self.blocks.data if self.blocks is not None else None
+        return [self.nodes.data, self.leaf_tris.data, self.verts.data, blocks, self.bmin, self.bmax]
 
     def nodes_host(self) -> tuple[np.ndarray, np.ndarray]:
         """The node array (``NODE_DTYPE``, preorder) and the leaf triangle lists, read back.
@@ -122,9 +125,12 @@ class KdTree:
         return n, dev.to_device(org4), dev.to_device(dir4), dev.to_device(rng)
 
 
-def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool] | None = None) -> KdTree:
+def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool] | None = None,
+          blocks: bool | None = None) -> KdTree:
     """A kd-tree over ``triangles`` (``(N, 3, 3)`` float32), built on
-    ``device``; ``should_stop`` is polled after every level of the build."""
+    ``device``; ``should_stop`` is polled after every level of the build.
+    With leaf blocks where ``blocks`` (None: where the device wants them,
+    kdtree_blocks.wanted)."""
     tris = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
     if not np.isfinite(tris).all():
         bad = int((~np.isfinite(tris).all(axis=(1, 2))).sum())
@@ -136,10 +142,15 @@ def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool]
         verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
     with timer.stage("build"):
         out = build_tree(device, verts_dev, count, should_stop=should_stop)
+    with timer.stage("blocks"):
+        block_array = None
+        if blocks if blocks is not None else kdtree_blocks.wanted(device):
+            block_array = kdtree_blocks.make(device, out.nodes, out.leaf_tris, verts_dev, int(out.stats["nodes"]))
     stats = dict(out.stats)
-    stats["ms"] = {"upload": timer.ms["upload"], **out.stats["ms"]}
-    stats["ms"]["total"] = timer.ms["upload"] + timer.ms["build"]
+    stats["ms"] = {"upload": timer.ms["upload"], **out.stats["ms"], "blocks": timer.ms["blocks"]}
+    stats["ms"]["total"] = timer.ms["upload"] + timer.ms["build"] + timer.ms["blocks"]
     stats["triangles"] = count
+    stats["blocks"] = kdtree_blocks.count(block_array)
     return KdTree(
         device=device,
         nodes=out.nodes,
@@ -149,5 +160,6 @@ def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool]
         bmax=out.bmax,
         triangle_count=count,
         stats=stats,
+        blocks=block_array,
     )
 

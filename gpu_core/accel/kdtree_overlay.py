@@ -20,6 +20,7 @@ from ..device import Device, primitives
 from ..device.constants import KD_MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE, rows_differ
 from ..device.timer import StageTimer
+from . import kdtree_blocks
 from .kdtree import KdTree, build
 from .kdtree_build import depth_limit
 
@@ -28,8 +29,9 @@ OVERLAY_SHARE = 0.25  # most triangles an overlay holds, as a share of the scene
 
 
 def programs() -> list[tuple[str, dict]]:
-    """The program joining the trees (the overlay's own build needs kdtree_build's)."""
-    return [(PROGRAM, {})]
+    """The programs joining the trees and making the joined tree's blocks
+    (the overlay's own build needs kdtree_build's)."""
+    return [(PROGRAM, {}), *kdtree_blocks.programs()]
 
 
 def moved_rows(base_triangles: np.ndarray | None, triangles: np.ndarray) -> np.ndarray | None:
@@ -57,7 +59,7 @@ def overlay(device: Device, base: KdTree, rows: np.ndarray, moved_triangles: np.
     rows = np.asarray(rows, np.int32)
     count = base.triangle_count
     timer = StageTimer()
-    over = build(device, np.asarray(moved_triangles, np.float32).reshape(-1, 3, 3), should_stop)
+    over = build(device, np.asarray(moved_triangles, np.float32).reshape(-1, 3, 3), should_stop, blocks=False)
     with timer.stage("join"):
         # the corners now: the base's, the moved triangles' written over them on the device
         verts = device.array(3 * count, base.verts.dtype)
@@ -76,11 +78,13 @@ def overlay(device: Device, base: KdTree, rows: np.ndarray, moved_triangles: np.
         device.kernel(PROGRAM, "KdOverlay_leaves")(
             base_refs + over_refs, base.leaf_tris.data, np.int32(base_refs), device.to_device(moved),
             over.leaf_tris.data, device.to_device(rows), np.int32(over_refs), leaf_tris.data)
+        blocks = kdtree_blocks.make(device, nodes, leaf_tris, verts, 1 + nb + no) if base.blocks is not None else None
     stats = dict(base.stats)
-    stats.update(nodes=1 + nb + no, leaf_references=base_refs + over_refs, overlay_triangles=len(rows),
+    stats.update(nodes=1 + nb + no, leaf_references=base_refs + over_refs, blocks=kdtree_blocks.count(blocks),
+                 overlay_triangles=len(rows),
                  overlay_nodes=no, depth=max(base.stats["depth"], over.stats["depth"]) + 1,
                  ms={"overlay_build": over.stats["ms"]["total"], "join": timer.ms["join"]})
     stats["ms"]["total"] = stats["ms"]["overlay_build"] + stats["ms"]["join"]
     return KdTree(device=device, nodes=nodes, leaf_tris=leaf_tris, verts=verts,
                   bmin=np.minimum(base.bmin, over.bmin), bmax=np.maximum(base.bmax, over.bmax),
-                  triangle_count=count, stats=stats, base=base)
+                  triangle_count=count, stats=stats, base=base, blocks=blocks)

@@ -72,6 +72,65 @@ inline bool KdTree_triangle(const KdRay *ray, float4 v0, float4 v1, float4 v2,
     return true;
 }
 
+
+/* KdTree_triangle for the four lanes of a leaf block (accel/kdtree_blocks.cl)
+ * at once, lane by lane the same arithmetic, so the same outcome for each
+ * triangle: the index of the nearest triangle hit with t in (tmin, tmax)
+ * (the lowest lane on a tie, as the leaf list's order would have it), its
+ * t and barycentrics; -1 when none is. */
+inline int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin, float tmax, float *t, float *u,
+                        float *v) {
+#pragma OPENCL FP_CONTRACT OFF
+    /* corners relative to the ray origin, coordinate by coordinate */
+    float4 ox = (float4)(ray->org.x), oy = (float4)(ray->org.y), oz = (float4)(ray->org.z);
+    float4 d0[3] = {blk[0] - ox, blk[1] - oy, blk[2] - oz};
+    float4 d1[3] = {blk[3] - ox, blk[4] - oy, blk[5] - oz};
+    float4 d2[3] = {blk[6] - ox, blk[7] - oy, blk[8] - oz};
+    /* permuted and sheared as KdTree_triangle does */
+    int kx = ray->perm.x, ky = ray->perm.y, kz = ray->perm.z;
+    float4 sx = (float4)(ray->sx), sy = (float4)(ray->sy);
+    float4 az = d0[kz], bz = d1[kz], cz = d2[kz];
+    float4 ax = d0[kx] - sx * az, ay = d0[ky] - sy * az;
+    float4 bx = d1[kx] - sx * bz, by = d1[ky] - sy * bz;
+    float4 cx = d2[kx] - sx * cz, cy = d2[ky] - sy * cz;
+    float4 e0 = cx * by - cy * bx;
+    float4 e1 = ax * cy - ay * cx;
+    float4 e2 = bx * ay - by * ax;
+    /* inside: no edge value of each sign; a lane holding no triangle never is */
+    float4 zero = (float4)(0.0f);
+    int4 ids = as_int4(blk[9]);
+    int4 below = (e0 < zero) | (e1 < zero) | (e2 < zero);
+    int4 above = (e0 > zero) | (e1 > zero) | (e2 > zero);
+    float4 det = e0 + e1 + e2;
+    int4 ok = ~(below & above) & (det != zero) & (ids >= (int4)(0));
+    if (!any(ok)) return -1;
+    float4 inv = (float4)(1.0f) / det;
+    float4 tt = (e0 * az + e1 * bz + e2 * cz) * (float4)(ray->sz) * inv;
+    ok &= (tt > (float4)(tmin)) & (tt < (float4)(tmax));
+    if (!any(ok)) return -1;
+    /* the nearest lane, the lowest on a tie */
+    float4 tk = select((float4)(INFINITY), tt, ok);
+    int lane = 0;
+    float best = tk.x;
+    if (tk.y < best) {
+        best = tk.y;
+        lane = 1;
+    }
+    if (tk.z < best) {
+        best = tk.z;
+        lane = 2;
+    }
+    if (tk.w < best) {
+        best = tk.w;
+        lane = 3;
+    }
+    float4 uu = e1 * inv, vv = e2 * inv;
+    *t = best;
+    *u = lane == 0 ? uu.x : (lane == 1 ? uu.y : (lane == 2 ? uu.z : uu.w));
+    *v = lane == 0 ? vv.x : (lane == 1 ? vv.y : (lane == 2 ? vv.z : vv.w));
+    return lane == 0 ? ids.x : (lane == 1 ? ids.y : (lane == 2 ? ids.z : ids.w));
+}
+
 /* Clip [tmin, tmax] to the root box; false when the ray misses it. */
 inline bool KdTree_clip_root(const KdTree *tree, float3 org, float3 inv_dir,
                              float *tmin, float *tmax) {
@@ -157,19 +216,36 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
             node = visit_first ? first : second;
             n = tree->nodes[node];
         }
-        /* leaf: its triangles against the whole remaining ray (an overlay
-         * tree's base lists a moved triangle as -1: kdtree_overlay.cl) */
-        for (int i = 0; i < n.count; ++i) {
-            int tri = tree->leaf_tris[n.child + i];
-            if (tri < 0) continue;
-            float t, u, v;
-            if (KdTree_triangle(&ray, tree->verts[3 * tri], tree->verts[3 * tri + 1],
-                                tree->verts[3 * tri + 2], tmin, hit->t, &t, &u, &v)) {
-                hit->t = t;
-                hit->tri = tri;
-                hit->u = u;
-                hit->v = v;
-                if (any_hit) return true;
+        /* leaf: its triangles against the whole remaining ray, four at a
+         * time from its blocks where the tree has them, else one by one
+         * from its list (an overlay tree's base lists a moved triangle as
+         * -1: kdtree_overlay.cl) */
+        if (tree->blocks) {
+            const __global float4 *blk = tree->blocks + (size_t)KD_BLOCK_ROWS * as_int(n.split);
+            for (int k = 0; k < n.count; k += KD_BLOCK_LANES, blk += KD_BLOCK_ROWS) {
+                float t, u, v;
+                int tri = KdTree_block(&ray, blk, tmin, hit->t, &t, &u, &v);
+                if (tri >= 0) {
+                    hit->t = t;
+                    hit->tri = tri;
+                    hit->u = u;
+                    hit->v = v;
+                    if (any_hit) return true;
+                }
+            }
+        } else {
+            for (int i = 0; i < n.count; ++i) {
+                int tri = tree->leaf_tris[n.child + i];
+                if (tri < 0) continue;
+                float t, u, v;
+                if (KdTree_triangle(&ray, tree->verts[3 * tri], tree->verts[3 * tri + 1],
+                                    tree->verts[3 * tri + 2], tmin, hit->t, &t, &u, &v)) {
+                    hit->t = t;
+                    hit->tri = tri;
+                    hit->u = u;
+                    hit->v = v;
+                    if (any_hit) return true;
+                }
             }
         }
         if (hit->tri >= 0 && hit->t <= t_exit) return true;

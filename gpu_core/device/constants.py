@@ -11,6 +11,9 @@ from __future__ import annotations
 # kd-trees (triangle and point): KdNode.axis of a leaf, deepest levels
 KD_LEAF = 3
 KD_MAX_DEPTH = 64  # triangle tree: build limit and traversal stack
+# leaf blocks (accel/kdtree_blocks.cl): triangles tested together, float4 rows a block
+KD_BLOCK_LANES = 4
+KD_BLOCK_ROWS = 10
 POINT_TREE_MAX_DEPTH = 60  # point tree: build limit and kNN stack
 POINT_BUILD_SMALL = 32  # points of a small point-tree node: the width of its bit masks
 POINT_BUILD_CHUNK = 256  # points of a large point-tree node processed by one work item

@@ -43,10 +43,10 @@ _GENERATED: dict[str, Callable[[], str]] = {
 # Programs asked for without defines of their own are built as one, the
 # bundle: PoCL spends about 0.3 s on a program before its first line (it
 # parses its OpenCL C header), and a first render waits for its programs'
-# builds one after another (these six: 2.4 s apart, 1.3 s as one).
+# builds one after another (six of these: 2.4 s apart, 1.3 s as one).
 BUNDLE = "device/bundle.cl"
-BUNDLED = ("device/primitives.cl", "accel/point_tree_build.cl", "gi/cache/frame.cl", "gi/cache/seeding.cl",
-           "gi/cache/clusters.cl", "gi/cache/grid.cl")
+BUNDLED = ("device/primitives.cl", "accel/point_tree_build.cl", "accel/kdtree_blocks.cl", "gi/cache/frame.cl",
+           "gi/cache/seeding.cl", "gi/cache/clusters.cl", "gi/cache/grid.cl")
 # Likewise the two tracing programs that take the scene's defines and no
 # others, photon tracing and the shading points: each parses the whole of
 # the shading code besides the header.
