@@ -72,14 +72,21 @@ inline bool KdTree_triangle(const KdRay *ray, float4 v0, float4 v1, float4 v2,
     return true;
 }
 
+/* Whether any lane of a mask is set (written out: PoCL would call its
+ * library's any(), as it would select(), after its inliner has run). */
+inline bool KdTree_any(int4 m) { return (m.x | m.y | m.z | m.w) != 0; }
+
+/* One lane of a vector. */
+inline float KdTree_lane(float4 v, int lane) { return lane == 0 ? v.x : (lane == 1 ? v.y : (lane == 2 ? v.z : v.w)); }
 
 /* KdTree_triangle for the four lanes of a leaf block (accel/kdtree_blocks.cl)
  * at once, lane by lane the same arithmetic, so the same outcome for each
  * triangle: the index of the nearest triangle hit with t in (tmin, tmax)
- * (the lowest lane on a tie, as the leaf list's order would have it), its
- * t and barycentrics; -1 when none is. */
-inline int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin, float tmax, float *t, float *u,
-                        float *v) {
+ * (the lowest lane on a tie, as the leaf list's order would have it), or
+ * with any_hit the lowest lane hit (the list's first), its t and
+ * barycentrics; -1 when none is. */
+inline int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin, float tmax, bool any_hit, float *t,
+                        float *u, float *v) {
 #pragma OPENCL FP_CONTRACT OFF
     /* corners relative to the ray origin, coordinate by coordinate */
     float4 ox = (float4)(ray->org.x), oy = (float4)(ray->org.y), oz = (float4)(ray->org.z);
@@ -103,32 +110,33 @@ inline int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin
     int4 above = (e0 > zero) | (e1 > zero) | (e2 > zero);
     float4 det = e0 + e1 + e2;
     int4 ok = ~(below & above) & (det != zero) & (ids >= (int4)(0));
-    if (!any(ok)) return -1;
+    if (!KdTree_any(ok)) return -1;
     float4 inv = (float4)(1.0f) / det;
     float4 tt = (e0 * az + e1 * bz + e2 * cz) * (float4)(ray->sz) * inv;
     ok &= (tt > (float4)(tmin)) & (tt < (float4)(tmax));
-    if (!any(ok)) return -1;
-    /* the nearest lane, the lowest on a tie */
-    float4 tk = select((float4)(INFINITY), tt, ok);
-    int lane = 0;
-    float best = tk.x;
-    if (tk.y < best) {
-        best = tk.y;
-        lane = 1;
+    if (!KdTree_any(ok)) return -1;
+    int lane;
+    if (any_hit) {
+        lane = ok.x ? 0 : (ok.y ? 1 : (ok.z ? 2 : 3));
+    } else {
+        /* the nearest lane, the lowest on a tie (INFINITY in the others) */
+        float4 tk = as_float4((as_int4(tt) & ok) | (as_int4((float4)(INFINITY)) & ~ok));
+        lane = 0;
+        float best = tk.x;
+        if (tk.y < best) {
+            best = tk.y;
+            lane = 1;
+        }
+        if (tk.z < best) {
+            best = tk.z;
+            lane = 2;
+        }
+        if (tk.w < best) lane = 3;
     }
-    if (tk.z < best) {
-        best = tk.z;
-        lane = 2;
-    }
-    if (tk.w < best) {
-        best = tk.w;
-        lane = 3;
-    }
-    float4 uu = e1 * inv, vv = e2 * inv;
-    *t = best;
-    *u = lane == 0 ? uu.x : (lane == 1 ? uu.y : (lane == 2 ? uu.z : uu.w));
-    *v = lane == 0 ? vv.x : (lane == 1 ? vv.y : (lane == 2 ? vv.z : vv.w));
-    return lane == 0 ? ids.x : (lane == 1 ? ids.y : (lane == 2 ? ids.z : ids.w));
+    *t = KdTree_lane(tt, lane);
+    *u = KdTree_lane(e1 * inv, lane);
+    *v = KdTree_lane(e2 * inv, lane);
+    return as_int(KdTree_lane(as_float4(ids), lane));
 }
 
 /* Clip [tmin, tmax] to the root box; false when the ray misses it. */
@@ -224,7 +232,7 @@ inline bool KdTree_traverse(const KdTree *tree, float3 org, float3 dir,
             const __global float4 *blk = tree->blocks + (size_t)KD_BLOCK_ROWS * as_int(n.split);
             for (int k = 0; k < n.count; k += KD_BLOCK_LANES, blk += KD_BLOCK_ROWS) {
                 float t, u, v;
-                int tri = KdTree_block(&ray, blk, tmin, hit->t, &t, &u, &v);
+                int tri = KdTree_block(&ray, blk, tmin, hit->t, any_hit, &t, &u, &v);
                 if (tri >= 0) {
                     hit->t = t;
                     hit->tri = tri;
