@@ -144,7 +144,7 @@ def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool]
         out = build_tree(device, verts_dev, count, should_stop=should_stop)
     with timer.stage("blocks"):
         block_array = None
-        if blocks if blocks is not None else kdtree_blocks.wanted(device):
+        if kdtree_blocks.wanted(device) if blocks is None else blocks:
             block_array = kdtree_blocks.make(device, out.nodes, out.leaf_tris, verts_dev, int(out.stats["nodes"]))
     stats = dict(out.stats)
     stats["ms"] = {"upload": timer.ms["upload"], **out.stats["ms"], "blocks": timer.ms["blocks"]}
