@@ -10,6 +10,10 @@
 #include "device/structs.h"
 #include "accel/kdtree.h"
 
+#if KD_BLOCK_LANES != 4 || KD_BLOCK_ROWS != 10
+#error "a block is nine float4 of corners and one int4 of indices (KdTree_block reads it so)"
+#endif
+
 /* Blocks of node i: ceil(count / 4) for a leaf, 0 for an inner node. */
 __kernel void KdBlocks_count(const __global KdNode *nodes, const int n, __global int *count) {
     int i = Launch_global_id();
