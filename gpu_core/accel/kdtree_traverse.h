@@ -72,10 +72,6 @@ inline bool KdTree_triangle(const KdRay *ray, float4 v0, float4 v1, float4 v2,
     return true;
 }
 
-/* Whether any lane of a mask is set (written out: PoCL would call its
- * library's any(), as it would select(), after its inliner has run). */
-inline bool KdTree_any(int4 m) { return (m.x | m.y | m.z | m.w) != 0; }
-
 /* One lane of a vector. */
 inline float KdTree_lane(float4 v, int lane) { return lane == 0 ? v.x : (lane == 1 ? v.y : (lane == 2 ? v.z : v.w)); }
 
@@ -110,17 +106,17 @@ inline int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin
     int4 above = (e0 > zero) | (e1 > zero) | (e2 > zero);
     float4 det = e0 + e1 + e2;
     int4 ok = ~(below & above) & (det != zero) & (ids >= (int4)(0));
-    if (!KdTree_any(ok)) return -1;
+    if (!any(ok)) return -1;
     float4 inv = (float4)(1.0f) / det;
     float4 tt = (e0 * az + e1 * bz + e2 * cz) * (float4)(ray->sz) * inv;
     ok &= (tt > (float4)(tmin)) & (tt < (float4)(tmax));
-    if (!KdTree_any(ok)) return -1;
+    if (!any(ok)) return -1;
     int lane;
     if (any_hit) {
         lane = ok.x ? 0 : (ok.y ? 1 : (ok.z ? 2 : 3));
     } else {
         /* the nearest lane, the lowest on a tie (INFINITY in the others) */
-        float4 tk = as_float4((as_int4(tt) & ok) | (as_int4((float4)(INFINITY)) & ~ok));
+        float4 tk = select((float4)(INFINITY), tt, ok);
         lane = 0;
         float best = tk.x;
         if (tk.y < best) {

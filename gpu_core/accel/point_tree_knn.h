@@ -138,7 +138,7 @@ inline void PointTree_knn(const PointTree *tree, float3 q, int k, float max_d2, 
             float4 dz = (float4)(p0.z, p1.z, p2.z, p3.z) - (float4)(q.z);
             float4 d2 = dx * dx + dy * dy + dz * dz;
             int4 near = d2 < (float4)(h->worst);
-            if (!(near.x | near.y | near.z | near.w)) continue; /* the bound only shrinks */
+            if (!any(near)) continue; /* the bound only shrinks */
             if (d2.x < h->worst) Knn_push(h, d2.x, i);
             if (d2.y < h->worst) Knn_push(h, d2.y, i + 1);
             if (d2.z < h->worst) Knn_push(h, d2.z, i + 2);

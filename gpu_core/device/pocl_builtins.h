@@ -5,7 +5,8 @@
  * inliner has run, so every dot, fmax or sqrt stays a function call: on the
  * CPU device a third of the image kernel's own time went to calls of
  * three-instruction functions, and the kd-tree traversal spent 12% in
- * isnan, isinf, fmin and fmax. Here the most used ones are written inline,
+ * isnan, isinf, fmin and fmax (a vector's any() and select() too). Here
+ * the most used ones are written inline,
  * with the builtins' results: fmin/fmax as IEEE minNum/maxNum (a NaN
  * operand loses), sqrt correctly rounded, length and normalize as the
  * plain sum of squares where it can neither overflow nor underflow and the
@@ -65,6 +66,16 @@ INLINE_OVL float Inline_mix(float x, float y, float a) { return x + (y - x) * a;
 INLINE_OVL float3 Inline_mix(float3 x, float3 y, float a) { return x + (y - x) * a; }
 INLINE_OVL float3 Inline_mix(float3 x, float3 y, float3 a) { return x + (y - x) * a; }
 INLINE_OVL float4 Inline_mix(float4 x, float4 y, float a) { return x + (y - x) * a; }
+
+/* any (a lane's sign bit set) and select (each lane by the sign bit of
+ * c's, a scalar by c != 0), as the specification defines them */
+INLINE_OVL int Inline_any(int x) { return x < 0; }
+INLINE_OVL int Inline_any(int4 m) { return (m.x | m.y | m.z | m.w) < 0; }
+INLINE_OVL float Inline_select(float a, float b, int c) { return c ? b : a; }
+INLINE_OVL float4 Inline_select(float4 a, float4 b, int4 c) {
+    int4 take_b = c >> 31;
+    return as_float4((as_int4(b) & take_b) | (as_int4(a) & ~take_b));
+}
 
 /* dot and cross */
 INLINE_OVL float Inline_dot(float2 a, float2 b) { return a.x * b.x + a.y * b.y; }
@@ -160,6 +171,10 @@ INLINE_OVL float Inline_native_cos(float x) {
 #define clamp Inline_clamp
 #undef mix
 #define mix Inline_mix
+#undef any
+#define any Inline_any
+#undef select
+#define select Inline_select
 #undef dot
 #define dot Inline_dot
 #undef cross

@@ -1,5 +1,5 @@
 """The inlined math builtins (device/pocl_builtins.h, put before every
-program on PoCL) give the builtins' results: the same kernel built with
+program on PoCL; any and select among them) give the builtins' results: the same kernel built with
 them and built plainly by the driver agree, at NaN operands, signed zeros,
 infinities, and at vectors so tiny or huge their squares under- or overflow."""
 
@@ -31,12 +31,17 @@ __kernel void Builtins_probe(const __global float4 *a, const __global float4 *b,
     o[10] = fmin(x, y) + fmax(x, 1.0f) * 0.0f;
     ulong bits = ((ulong)as_uint(x.x) << 32) | as_uint(y.y);
     o[11] = (float4)((float)popcount(as_uint(x.x)), (float)popcount(bits), 0.0f, 0.0f);
+    int4 m = as_int4(x);  /* sign bits set and not, and lanes nonzero without one */
+    o[12] = select(x, y, m);
+    o[13] = (float4)((float)any(m), (float)any(m & (int4)(0x7fffffff)), (float)any(as_int(x.x)),
+                     select(x.y, y.y, as_int(x.z)));
 }
 """
-OUTPUTS = 12
+OUTPUTS = 14
 # outputs computed exactly alike (selections, exact operations); the rest may round differently
 _EXACT = [(0, slice(0, 4)), (1, slice(0, 3)), (2, slice(0, 3)), (3, slice(0, 3)), (4, slice(0, 4)), (5, slice(0, 3)),
-          (7, slice(3, 4)), (8, slice(0, 3)), (9, slice(3, 4)), (10, slice(0, 4)), (11, slice(0, 2))]
+          (7, slice(3, 4)), (8, slice(0, 3)), (9, slice(3, 4)), (10, slice(0, 4)), (11, slice(0, 2)),
+          (12, slice(0, 4)), (13, slice(0, 4))]
 
 
 def _rows():
