@@ -16,6 +16,9 @@ sys.path.insert(0, ROOT)
 
 def load_bpy():
     """bpy with the add-on registered."""
+    from gpu_core.device import load_pip_drivers
+
+    load_pip_drivers()  # before bpy: see gpu_core/device/pip_drivers.py
     import bpy
 
     import blender_addon

@@ -105,6 +105,9 @@ def render_file(args) -> tuple[dict, list[str], str]:
     if not os.path.isfile(blend):
         raise CliError(f"{args.blend} does not exist")
 
+    from gpu_core.device import load_pip_drivers
+
+    load_pip_drivers()  # before bpy: see gpu_core/device/pip_drivers.py
     import bpy
 
     from . import register

@@ -12,6 +12,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from gpu_core.device import load_pip_drivers  # noqa: E402
+
+load_pip_drivers()  # before any test module imports bpy: see gpu_core/device/pip_drivers.py
+
 
 @pytest.fixture(scope="session")
 def device():

@@ -94,6 +94,10 @@ _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 # s in threads on an H100; but helper processes there took 27-35 s against
 # 16-22 s in threads, so it keeps to threads.)
 _SERIAL_COMPILER_PLATFORMS = ("Portable Computing Language",)
+
+# PoCL 3.0's LLVM 14 names a CPU newer than it "generic" and refuses to compile for it
+_UNKNOWN_CPU_HINT = ("\nThis OpenCL compiler does not know this CPU model. Choose another OpenCL device: "
+                     "Intel's CPU runtime (pip install intel-opencl-rt) or a GPU vendor's driver.")
 _MAX_HELPERS = 3
 _HELPER_WAIT = 300.0
 # A program's build cost, to share builds out evenly, in source characters:
@@ -388,7 +392,8 @@ class Programs:
             options = options + (_SIMULATOR_MARK,)
         dev = self.device
         ident = "\n".join([_CACHE_FORMAT, source, " ".join(options), dev.platform.name, dev.platform.version,
-                           dev.name, dev.driver_version, cl.VERSION_TEXT, os.environ.get("POCL_WORK_GROUP_SPECIALIZATION", "")])
+                           dev.name, dev.driver_version, cl.VERSION_TEXT, os.environ.get("POCL_WORK_GROUP_SPECIALIZATION", ""),
+                           os.environ.get("CL_CONFIG_USE_VECTORIZER", "")])
         digest = hashlib.sha256(ident.encode()).hexdigest()
         return source, options, kernel_cache_dir() / f"{Path(name).stem}-{digest[:32]}.bin"
 
@@ -436,7 +441,8 @@ class Programs:
                 compiled = cl.Program(self.context, source).compile(options=list(options))
             return cl.link_program(self.context, [compiled]), compiled
         except cl.RuntimeError as err:
-            raise DeviceError(f"OpenCL program {name!r} failed to build on {self.device.name.strip()}:\n{err}") from err
+            hint = _UNKNOWN_CPU_HINT if "unknown target CPU" in str(err) else ""
+            raise DeviceError(f"OpenCL program {name!r} failed to build on {self.device.name.strip()}:\n{err}{hint}") from err
 
     @staticmethod
     def _store_cached(path: Path, program: cl.Program) -> None:

@@ -1,7 +1,9 @@
 """Which OpenCL device renders: chosen by a spec string (argument, or the
 ``GPUGI_DEVICE`` environment variable):
 
-* ``""`` or ``"cpu"``: the first CPU device (PoCL from PyPI, the default);
+* ``""`` or ``"cpu"``: PoCL's CPU device from PyPI (the default) or, where
+  its compiler does not know the CPU, the first other CPU device (Intel's
+  CPU runtime from PyPI, made visible by pip_drivers);
 * ``"gpu"``: the first GPU device of any platform;
 * ``"P"`` or ``"P:D"``: platform whose name contains ``P`` (case-insensitive)
   or whose index is ``P``, and its device number ``D`` (default 0).
@@ -19,10 +21,19 @@ from dataclasses import dataclass
 import pyopencl as cl
 
 from ..errors import DeviceError
+from . import pip_drivers
 from .device import Device
+from .programs import kernel_cache_dir
+
+
+def load_pip_drivers() -> None:
+    """Make OpenCL drivers installed by pip visible (pip_drivers); once per
+    process, before the OpenCL loader's first call and before ``bpy`` is imported."""
+    pip_drivers.register(kernel_cache_dir())
 
 
 def _all_devices() -> list[tuple[int, cl.Platform, list[cl.Device]]]:
+    load_pip_drivers()
     out = []
     try:
         platforms = cl.get_platforms()
@@ -85,18 +96,26 @@ def list_devices() -> list[str]:
 SIMULATORS = ("oclgrind",)
 
 
+def is_pocl(dev: cl.Device) -> bool:
+    return "PoCL" in _text(dev, "version")
+
+
+def compiles_here(dev: cl.Device) -> bool:
+    """False for a PoCL device whose LLVM does not know this CPU: it names
+    it "generic" (the end of its version string) and refuses every program."""
+    return not (is_pocl(dev) and _text(dev, "version").endswith("-generic"))
+
+
 def _match(spec: str, found) -> cl.Device | None:
     spec = spec.strip()
     lowered = spec.lower()
     if lowered in ("", "cpu", "gpu"):
         wanted = cl.device_type.GPU if lowered == "gpu" else cl.device_type.CPU
-        for _, platform, devices in found:
-            if any(name in platform.name.lower() for name in SIMULATORS):
-                continue  # a simulator runs only when named (GPUGI_DEVICE=oclgrind)
-            for dev in devices:
-                if dev.type & wanted:
-                    return dev
-        return None
+        candidates = [dev for _, platform, devices in found
+                      if not any(name in platform.name.lower() for name in SIMULATORS)  # only when named
+                      for dev in devices if dev.type & wanted and compiles_here(dev)]
+        candidates.sort(key=lambda dev: not is_pocl(dev))  # PoCL first: the device measured
+        return candidates[0] if candidates else None
     platform_part, _, device_part = spec.partition(":")
     try:
         device_number = int(device_part) if device_part else 0
@@ -110,6 +129,18 @@ def _match(spec: str, found) -> cl.Device | None:
         if hit and 0 <= device_number < len(devices):
             return devices[device_number]
     return None
+
+
+def no_device_message(found, available: str) -> str:
+    """What to install when no CPU device can render."""
+    if any(is_pocl(dev) and not compiles_here(dev) for _, _, devices in found for dev in devices):
+        intel = (f"Intel's CPU runtime is installed but could not be loaded ({pip_drivers.problem}). "
+                 if pip_drivers.problem else "Install Intel's CPU runtime for OpenCL (intel-opencl-rt on PyPI) ")
+        return ("No OpenCL device can compile kernels here: PoCL 3.0's compiler (LLVM 14) does not know "
+                f"this CPU model. {intel}or a GPU vendor's OpenCL driver. Devices seen: {available}.")
+    return ("No OpenCL device found. Install a GPU vendor's OpenCL driver, or the CPU device "
+            "(pip install pocl-binary-distribution; in Blender on Linux x64, the extension build "
+            f"that bundles it). Devices seen: {available}.")
 
 
 _DEVICES: dict[str, Device] = {}
@@ -142,11 +173,7 @@ def _create(spec: str) -> Device:
         chosen = _match("cpu", found)
         available = "; ".join(list_devices()) or "none"
         if chosen is None:
-            raise DeviceError(
-                "No OpenCL device found. Install a GPU vendor's OpenCL driver, or the CPU device "
-                "(pip install pocl-binary-distribution; in Blender on Linux x64, the extension build "
-                f"that bundles it). Devices seen: {available}."
-            )
+            raise DeviceError(no_device_message(found, available))
         message = (
             f"OpenCL device {spec!r} not found (devices: {available}); "
             f"using {chosen.platform.name.strip()} / {chosen.name.strip()} instead."

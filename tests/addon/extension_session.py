@@ -76,7 +76,14 @@ scene.render.resolution_percentage = max(1, round(100 * 48 / scene.render.resolu
 seen["asked_width"] = scene.render.resolution_x * scene.render.resolution_percentage // 100
 scene.gpugi.mode = "REFERENCE"
 scene.gpugi.samples, scene.gpugi.diffuse_bounces = 2, 1
-rgba = render_pixels(scene, os.path.join(os.path.dirname(OUT_JSON), "render.exr"))
+# (a CPU newer than the bundled PoCL's compiler, with no GPU: no device can render, and F12 says why)
+select = sys.modules["gpu_core.device.select"]
+seen["cpu_compiles"] = any(select.compiles_here(dev) for _, _, devices in select._all_devices() for dev in devices)
+try:
+    rgba = render_pixels(scene, os.path.join(os.path.dirname(OUT_JSON), "render.exr"))
+except RuntimeError as err:
+    rgba = np.full((1, 1, 4), np.nan, np.float32)
+    seen["render_raised"] = str(err)
 last_run = sys.modules[PACKAGE + ".final"].LAST_RUN
 seen["render_error"] = last_run.get("error", "")
 seen["render_warnings"] = last_run.get("warnings", [])

@@ -154,6 +154,8 @@ def test_installed_extension_imports_its_own_gpu_core_and_bundled_pyopencl(sessi
 
 @pytest.mark.slow
 def test_installed_extension_renders_and_caches_kernels_in_its_user_folder(session):
+    if not session["cpu_compiles"]:
+        pytest.skip("the bundled PoCL's compiler does not know this CPU and there is no other device")
     assert session["render_error"] == "" and session["render_warnings"] == []
     assert session["denoised"]  # by the bundled Open Image Denoise
     assert Path(session["pyoidn"]).is_relative_to(Path(session["extensions"]) / ".local")
@@ -164,6 +166,14 @@ def test_installed_extension_renders_and_caches_kernels_in_its_user_folder(sessi
     assert Path(session["kernel_cache"]) == user_folder / "kernels"
     assert Path(session["pocl_cache"]) == user_folder / "pocl"
     assert session["kernel_cache_files"] > 0 and session["pocl_cache_files"] > 0
+
+
+@pytest.mark.slow
+def test_installed_extension_on_a_cpu_its_pocl_cannot_compile_for_says_so_at_f12(session):
+    if session["cpu_compiles"]:
+        pytest.skip("the bundled PoCL compiles for this CPU")
+    assert "does not know this CPU model" in session["render_error"], session["render_error"]
+    assert "does not know this CPU model" in session["render_raised"]
 
 
 @pytest.mark.slow
