@@ -83,6 +83,9 @@ _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 # moved hit distances past the tests' 1e-4; it costs the image kernel there
 # 5-30% (README, "On a GPU").
 _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
+# PoCL 3.0's LLVM 14 names a CPU newer than it "generic" and refuses to compile for it
+_UNKNOWN_CPU_HINT = ("\nThis OpenCL compiler does not know this CPU model. Choose another OpenCL device: "
+                     "Intel's CPU runtime (pip install intel-opencl-rt) or a GPU vendor's driver.")
 # Platforms whose compiler builds one program at a time per process, threads
 # or not (PoCL: a first render's 8 s of builds on two cores took 8 s of CPU):
 # there a render's kernels are compiled ahead in a helper process
@@ -95,9 +98,6 @@ _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 # 16-22 s in threads, so it keeps to threads.)
 _SERIAL_COMPILER_PLATFORMS = ("Portable Computing Language",)
 
-# PoCL 3.0's LLVM 14 names a CPU newer than it "generic" and refuses to compile for it
-_UNKNOWN_CPU_HINT = ("\nThis OpenCL compiler does not know this CPU model. Choose another OpenCL device: "
-                     "Intel's CPU runtime (pip install intel-opencl-rt) or a GPU vendor's driver.")
 _MAX_HELPERS = 3
 _HELPER_WAIT = 300.0
 # A program's build cost, to share builds out evenly, in source characters:
