@@ -96,8 +96,12 @@ def list_devices() -> list[str]:
 SIMULATORS = ("oclgrind",)
 
 
+# PoCL's platform, named as programs.py names it for its build quirks
+POCL_PLATFORM = "Portable Computing Language"
+
+
 def is_pocl(dev: cl.Device) -> bool:
-    return "PoCL" in _text(dev, "version")
+    return dev.platform.name.strip() == POCL_PLATFORM
 
 
 def compiles_here(dev: cl.Device) -> bool:

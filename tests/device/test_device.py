@@ -104,9 +104,12 @@ def test_an_automatic_choice_skips_a_simulator_platform_listed_first():
 
     from gpu_core.device.select import _match
 
-    simulator = SimpleNamespace(name="Oclgrind Simulator", type=cl.device_type.CPU, version="OpenCL 1.2 (Oclgrind)")
-    cpu = SimpleNamespace(name="pthread CPU", type=cl.device_type.CPU, version="OpenCL 3.0 PoCL HSTR: pthread-znver3")
-    found = [(0, SimpleNamespace(name="Oclgrind"), [simulator]), (1, SimpleNamespace(name="Portable Computing Language"), [cpu])]
+    oclgrind, pocl = SimpleNamespace(name="Oclgrind"), SimpleNamespace(name="Portable Computing Language")
+    simulator = SimpleNamespace(name="Oclgrind Simulator", type=cl.device_type.CPU, version="OpenCL 1.2 (Oclgrind)",
+                                platform=oclgrind)
+    cpu = SimpleNamespace(name="pthread CPU", type=cl.device_type.CPU, version="OpenCL 3.0 PoCL HSTR: pthread-znver3",
+                          platform=pocl)
+    found = [(0, oclgrind, [simulator]), (1, pocl, [cpu])]
     assert _match("", found) is cpu and _match("cpu", found) is cpu
     assert _match("oclgrind", found) is simulator  # named, it is used
 

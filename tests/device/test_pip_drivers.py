@@ -20,8 +20,8 @@ POCL_GENERIC = "OpenCL 3.0 PoCL HSTR: pthread-x86_64-unknown-linux-gnu-generic"
 
 def fake(platform: str, version: str, kind=cl.device_type.CPU):
     """A platform entry of _all_devices with one device of ``version``."""
-    dev = SimpleNamespace(name=f"{platform} CPU", type=kind, version=version)
-    return SimpleNamespace(name=platform), dev
+    platform = SimpleNamespace(name=platform)
+    return platform, SimpleNamespace(name=f"{platform.name} CPU", type=kind, version=version, platform=platform)
 
 
 def found(*entries):

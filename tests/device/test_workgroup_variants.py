@@ -18,8 +18,9 @@ SCENE = os.path.join(ROOT, "blend_scenes", "caustics.blend")  # every GI stage, 
 
 def _cpu_device_is_pocl() -> bool:
     from gpu_core.device import get_device
+    from gpu_core.device.select import is_pocl
 
-    return "Portable Computing Language" in get_device("cpu").device.platform.name
+    return is_pocl(get_device("cpu").device)
 
 
 # PoCL's cache is what these count; where PoCL's compiler does not know the CPU, the CPU device is another
