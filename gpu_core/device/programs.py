@@ -83,6 +83,11 @@ _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 # moved hit distances past the tests' 1e-4; it costs the image kernel there
 # 5-30% (README, "On a GPU").
 _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
+# Native cosine and sine only where they are accurate to a few ulp (PoCL):
+# elsewhere sampling.h takes the accurate pair (Intel's CPU runtime's
+# natives err by 1.5e-4, enough to lose a photon path: tests/device/test_sampling.py)
+_NATIVE_TRIG_PLATFORMS = ("Portable Computing Language",)
+_NATIVE_TRIG_MARK = "-DGPUGI_NATIVE_TRIG=1"
 # PoCL 3.0's LLVM 14 names a CPU newer than it "generic" and refuses to compile for it
 _UNKNOWN_CPU_HINT = ("\nThis OpenCL compiler does not know this CPU model. Choose another OpenCL device: "
                      "Intel's CPU runtime (pip install intel-opencl-rt) or a GPU vendor's driver.")
@@ -257,6 +262,7 @@ class Programs:
         self.device = device
         self._separate = device.platform.name.strip() in _SEPARATE_PLATFORMS
         self._inline_builtins = device.platform.name.strip() in _INLINE_BUILTINS_PLATFORMS
+        self._native_trig = device.platform.name.strip() in _NATIVE_TRIG_PLATFORMS
         self._exact_division = bool(device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
         self._simulator = any(name in device.platform.name.lower() for name in _SIMULATOR_PLATFORMS)
         self.builds: list[BuildRecord] = []
@@ -388,6 +394,8 @@ class Programs:
             options = options + (_EXACT_DIVISION,)
         if self._separate:
             options = options + (_SEPARATE_MARK,)
+        if self._native_trig:
+            options = options + (_NATIVE_TRIG_MARK,)
         if self._simulator:
             options = options + (_SIMULATOR_MARK,)
         dev = self.device

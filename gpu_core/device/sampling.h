@@ -13,12 +13,31 @@ inline void Sampling_frame(float3 n, float3 *t, float3 *b) {
     *b = (float3)(c, s + n.y * n.y * a, -n.y);
 }
 
-/* (cos, sin) of the angle 2 pi u of a sample: the native functions, whose
- * error (a few ulp on a CPU, about 1e-6 on a GPU) turns a sampled direction
- * by far less than its noise, at a third of the accurate ones' cost on PoCL. */
+/* Cosine and sine of a sampled angle: the native functions where the
+ * device's are accurate to a few ulp (PoCL; programs.py defines
+ * GPUGI_NATIVE_TRIG there), at a third of the accurate ones' cost; the
+ * accurate ones elsewhere (Intel's CPU runtime's native pair errs by
+ * 1.5e-4, which left cosine-sampled directions in the surface's plane). */
+inline float Sampling_cos(float x) {
+#ifdef GPUGI_NATIVE_TRIG
+    return native_cos(x);
+#else
+    return cos(x);
+#endif
+}
+
+inline float Sampling_sin(float x) {
+#ifdef GPUGI_NATIVE_TRIG
+    return native_sin(x);
+#else
+    return sin(x);
+#endif
+}
+
+/* (cos, sin) of the angle 2 pi u of a sample. */
 inline float2 Sampling_turn(float u) {
     float phi = 2.0f * PI_F * u;
-    return (float2)(native_cos(phi), native_sin(phi));
+    return (float2)(Sampling_cos(phi), Sampling_sin(phi));
 }
 
 /* Point in the unit disk (polar mapping). */
@@ -26,13 +45,21 @@ inline float2 Sampling_disk(float u1, float u2) {
     return sqrt(u1) * Sampling_turn(u2);
 }
 
+/* Cosine-distributed direction around +z: the disk point lifted to the
+ * hemisphere, its height sqrt(1 - u1) from the sample itself (1 - r^2 of
+ * the rounded disk point cancels to 0 at the rim: a direction in the
+ * surface's plane, which no pdf accepts). Above the plane for every u1 < 1. */
+inline float3 Sampling_cosine_local(float u1, float u2) {
+    float2 d = Sampling_disk(u1, u2);
+    return (float3)(d.x, d.y, sqrt(fmax(0.0f, 1.0f - u1)));
+}
+
 /* Cosine-distributed direction around n. */
 inline float3 Sampling_cosine(float3 n, float u1, float u2) {
     float3 t, b;
     Sampling_frame(n, &t, &b);
-    float2 d = Sampling_disk(u1, u2);
-    float z = sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y));
-    return normalize(d.x * t + d.y * b + z * n);
+    float3 d = Sampling_cosine_local(u1, u2);
+    return normalize(d.x * t + d.y * b + d.z * n);
 }
 
 /* Uniform direction in the cone around axis with cos(half angle) cos_max. */

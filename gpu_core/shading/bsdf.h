@@ -362,8 +362,7 @@ inline int Bsdf_sample(const Bsdf *f, float u_lobe, float u1, float u2, float u3
     float3 wo = f->gwo, one = (float3)(1.0f);
     int label;
     if (lobe == BSDF_DIFFUSE) {
-        float2 d = Sampling_disk(u1, u2);
-        *wi = (float3)(d.x, d.y, sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y)));
+        *wi = Sampling_cosine_local(u1, u2);
         label = BSDF_LABEL_DIFFUSE;
     } else {
         bool stretched = f->aniso && lobe != BSDF_GLASS;

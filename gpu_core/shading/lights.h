@@ -149,9 +149,8 @@ inline bool Light_rect_from(const Light *l, float3 x, LightRect *r) {
 
 /* Rectangle light: a direction uniform in its solid angle, by inverting
  * the solid angle cumulative along x, then along y. The angle's cosine and
- * sine are the native functions, as in Sampling_turn: they move a sampled
- * direction by far less than its noise, and the accurate pair (with its
- * argument reduction) took 6% of a Cornell-box image on PoCL. With
+ * sine are Sampling_turn's (the native pair on PoCL, where the accurate one
+ * with its argument reduction took 6% of a Cornell-box image). With
  * g = 1 / cos^2 of the sampled edge angle, the x of the sampled line is
  * |z0| / sqrt(g - 1) with the sign of fu, and distances stay squared until
  * a root is needed: five roots and six divisions where the textbook form
@@ -159,7 +158,7 @@ inline bool Light_rect_from(const Light *l, float3 x, LightRect *r) {
 inline void Light_sample_rect_solid_angle(const Light *l, const LightRect *r, float3 x, float u1, float u2,
                                           LightSample *s) {
     float au = u1 * r->solid + PI_F - r->a[2] - r->a[3];
-    float fu = (native_cos(au) * r->nz[0] - r->nz[2]) / native_sin(au);
+    float fu = (Sampling_cos(au) * r->nz[0] - r->nz[2]) / Sampling_sin(au);
     float g = fu * fu + r->nz[0] * r->nz[0];
     float z0 = r->z0;
     float xu = clamp(copysign(z0, fu) / sqrt(fmax(g - 1.0f, 1e-14f)), r->x0, r->x1); /* z0 < 0 */

@@ -107,10 +107,7 @@ def test_photons_in_a_row_leave_in_neighbouring_directions_covering_all_evenly(d
     np.testing.assert_allclose(azimuth, n / 8, rtol=0.04)
 
 
-def test_bounce_limit_ends_paths(device, request):
-    if device.device.platform.name.startswith("Intel(R) OpenCL"):
-        # on Intel's CPU runtime 2 of 2,000 paths leave the closed box at their third or fourth hit
-        request.applymarker(pytest.mark.xfail(reason="photon paths leak on Intel's CPU runtime", strict=True))
+def test_bounce_limit_ends_paths(device):
     lights = Lights.make([dict(kind=LIGHT_POINT, position=(0, 0, 0), power=(10, 10, 10))])
     maps = trace_photon_maps(device, closed_box(1.0, lights), global_photons=2000, max_bounces=3)
     # albedo 1: every photon is stored at each of its 4 hits (more than the

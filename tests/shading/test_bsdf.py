@@ -18,6 +18,7 @@ from gpu_core.shading import microfacet_tables
 
 PROGRAM = "shading/bsdf_check.cl"
 SAMPLE_ALL = 3
+LABEL_DIFFUSE = 1
 LABEL_SINGULAR = 4
 
 
@@ -405,6 +406,28 @@ def test_extremes_give_finite_bounded_samples(device, roughness, ior, cos_theta)
             # no firefly explosion: one sample weighs at most a few times the light it carries
             assert weight.max() <= 4.0
             assert np.abs(np.linalg.norm(wi[label != 0], axis=1) - 1).max() < 1e-3
+
+
+def test_diffuse_samples_at_the_disk_rim_leave_above_the_surface(device):
+    # u1 the largest numbers the random streams give (1 - k / 2^24), the
+    # angle all round: the sampled height must not cancel to 0 (a direction
+    # in the plane, lost), nor the sampled angle's cosine and sine stretch it
+    # (Intel's CPU runtime's native pair errs by 1.5e-4: both happened)
+    u1 = 1.0 - np.arange(1, 17) / 2.0**24
+    u2 = (np.arange(4096) + 0.5) / 4096
+    u = np.zeros((len(u1) * len(u2), 4), np.float32)
+    u[:, 1], u[:, 2] = np.repeat(u1, len(u2)), np.tile(u2, len(u1))
+    n = len(u)
+    out_dir, out_weight = device.empty(16 * n), device.empty(16 * n)
+    device.kernel(PROGRAM, "BsdfCheck_sample_at")(n, device.to_device(material(base_color=(0.8, 0.8, 0.8))), view(0.6),
+                                                  UP, np.int32(1), np.int32(SAMPLE_ALL), device.to_device(u),
+                                                  np.int32(n), out_dir, out_weight)
+    d = device.read(out_dir, (n, 4), np.float32).astype(np.float64)
+    w = device.read(out_weight, (n, 4), np.float32).astype(np.float64)
+    assert (d[:, 3] == LABEL_DIFFUSE).all()
+    assert (d[:, 2] > 0).all() and (w[:, 3] > 0).all()
+    np.testing.assert_allclose(np.linalg.norm(d[:, :3], axis=1), 1.0, atol=1e-5)
+    np.testing.assert_allclose(w[:, :3], 0.8, rtol=1e-4)
 
 
 def test_roughness_below_the_singular_bound_is_a_perfect_mirror(device):
