@@ -589,6 +589,89 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
     if (c < n) KdBuild_small_masks_at(c, small_roots, sel_root, sel_lo, sel_hi, cand);
 }
 
+/* The n values v[4 k] (one coordinate of n float4 bounds) sorted into
+ * c, ascending, with their element numbers in order (a stable insertion
+ * sort: ties by element). */
+inline void KdBuild_sort_coordinate(const __global float *v, int n, float *c, int *order) {
+    for (int i = 0; i < n; ++i) {
+        float x = v[4 * i];
+        int k = i;
+        while (k > 0 && c[k - 1] > x) {
+            c[k] = c[k - 1];
+            order[k] = order[k - 1];
+            k--;
+        }
+        c[k] = x;
+        order[k] = i;
+    }
+}
+
+/* How many of the sorted values c (KD_SMALL of them, those past the
+ * elements +infinity) are below p, or at most p where `inclusive`: a
+ * binary search by halving steps, with selects (its branches would go
+ * either way at random). */
+inline int KdBuild_count_below(const float *c, float p, bool inclusive) {
+    int count = 0;
+    for (int step = KD_SMALL; step > 0; step >>= 1) {
+        int next = min(count + step, KD_SMALL);
+        float v = c[next - 1];
+        count = (v < p || (inclusive && v == p)) ? next : count;
+    }
+    return count;
+}
+
+/* KdBuild_small_masks_at for the 2 n candidates of small root r on one
+ * axis at once (a CPU's form: a root's O(n^2) comparisons become two
+ * sorts and a binary search per candidate). By KdBuild_sides, an element
+ * is below a plane p where lo < p (the low rule) and above it where
+ * hi > p, which are prefixes of the elements sorted by lo and suffixes of
+ * those sorted by hi; and an element with lo >= p >= hi (flat in the
+ * plane, only ever one with lo >= hi) goes above under the low rule,
+ * below under the high rule. The same masks bit for bit. */
+inline void KdBuild_small_masks_sorted_at(int r, int axis, const __global int4 *small_roots,
+                                          const __global float4 *sel_lo, const __global float4 *sel_hi,
+                                          __global ulong2 *cand) {
+    int4 root = small_roots[r];
+    int n = root.y;
+    const __global float *lo = (const __global float *)(sel_lo + root.x) + axis;
+    const __global float *hi = (const __global float *)(sel_hi + root.x) + axis;
+    float lo_sorted[KD_SMALL], hi_sorted[KD_SMALL];
+    int lo_order[KD_SMALL], hi_order[KD_SMALL];
+    KdBuild_sort_coordinate(lo, n, lo_sorted, lo_order);
+    KdBuild_sort_coordinate(hi, n, hi_sorted, hi_order);
+    for (int j = n; j < KD_SMALL; ++j) lo_sorted[j] = hi_sorted[j] = INFINITY;
+    /* below[j]: the j lowest by lo; above[j]: all but the j lowest by hi */
+    ulong below[KD_SMALL + 1], above[KD_SMALL + 1];
+    below[0] = 0UL;
+    above[n] = 0UL;
+    for (int j = 0; j < n; ++j) {
+        below[j + 1] = below[j] | (1UL << lo_order[j]);
+        above[n - 1 - j] = above[n - j] | (1UL << hi_order[n - 1 - j]);
+    }
+    ulong flat = 0UL;
+    for (int k = 0; k < n; ++k) flat |= (ulong)(lo[4 * k] >= hi[4 * k]) << k;
+    for (int e = 0; e < n; ++e) {
+        for (int side = 0; side < 2; ++side) {
+            float p = side ? hi[4 * e] : lo[4 * e];
+            ulong in_plane = 0UL;
+            for (ulong left = flat; left != 0UL; left &= left - 1UL) {
+                int k = popcount((left & (~left + 1UL)) - 1UL);
+                in_plane |= (ulong)(lo[4 * k] >= p && hi[4 * k] <= p) << k;
+            }
+            ulong b = below[KdBuild_count_below(lo_sorted, p, false)];
+            ulong a = above[KdBuild_count_below(hi_sorted, p, true)];
+            cand[6 * (root.x + e) + 2 * axis + side] = side ? (ulong2)(b | in_plane, a) : (ulong2)(b, a | in_plane);
+        }
+    }
+}
+
+/* One work-item per small root and axis (root r = i / 3). */
+__kernel void KdBuild_small_masks_sorted(const __global int4 *small_roots, const __global float4 *sel_lo,
+                                         const __global float4 *sel_hi, const int n, __global ulong2 *cand) {
+    int i = Launch_global_id();
+    if (i < n) KdBuild_small_masks_sorted_at(i / 3, i % 3, small_roots, sel_lo, sel_hi, cand);
+}
+
 /* The plane of candidate c (6 per element: low and high face on each axis)
  * of element e, read as one float of its bounds. */
 inline float KdBuild_plane(const __global float4 *sel_lo, const __global float4 *sel_hi, int e, int c) {
@@ -596,81 +679,102 @@ inline float KdBuild_plane(const __global float4 *sel_lo, const __global float4 
     return face[4 * e + ((c % 6) >> 1)];
 }
 
+/* A small node's cell as its SAH search reads it: bounds, and per axis the
+ * two terms of a child's half surface area with the split on that axis,
+ * cap (the face across the axis) + length along it x side (its
+ * perimeter's half): A_below / 2 = cap + (plane - lo) side. */
+typedef struct {
+    float4 lo, hi, cap, side;
+} KdSahCell;
+
+inline KdSahCell KdBuild_sah_cell(float4 lo, float4 hi) {
+    float4 d = hi - lo;
+    KdSahCell cell = {lo, hi, (float4)(d.y * d.z, d.z * d.x, d.x * d.y, 0.0f),
+                      (float4)(d.y + d.z, d.z + d.x, d.x + d.y, 0.0f)};
+    return cell;
+}
+
 /* SAH cost of candidate c, the plane at `plane` on `axis` with element
- * masks m (below, above), for a node with element mask `mask` and cell
- * [lo, hi]; kept in *best_cost / *best_cand when lower. Planes outside the
- * open cell are skipped. */
-inline void KdBuild_consider_plane(int c, int axis, float plane, ulong2 m, ulong mask, float4 lo,
-                                   float4 hi, float area, float *best_cost, int *best_cand) {
-    if (!(Axis_of(lo, axis) < plane && plane < Axis_of(hi, axis))) return;
+ * masks m (below, above), for a node with element mask `mask`, up to the
+ * node's constants: N_below A_below / 2 + N_above A_above / 2 (the cost is
+ * C_t + that x 2 / A); kept in *best_raw / *best_cand when lower. Planes
+ * outside the open cell are skipped. */
+inline void KdBuild_consider_plane(int c, int axis, float plane, ulong2 m, ulong mask, const KdSahCell *cell,
+                                   float *best_raw, int *best_cand) {
+    float lo = Axis_of(cell->lo, axis), hi = Axis_of(cell->hi, axis);
+    if (!(lo < plane && plane < hi)) return;
     float below = (float)popcount(m.x & mask);
     float above = (float)popcount(m.y & mask);
-    float cost = KD_COST_TRAVERSE +
-                 (below * KdBuild_area(lo, Axis_with(hi, axis, plane)) +
-                  above * KdBuild_area(Axis_with(lo, axis, plane), hi)) / area;
-    if (cost < *best_cost) {
-        *best_cost = cost;
+    float cap = Axis_of(cell->cap, axis), side = Axis_of(cell->side, axis);
+    float raw = below * (cap + (plane - lo) * side) + above * (cap + (hi - plane) * side);
+    if (raw < *best_raw) {
+        *best_raw = raw;
         *best_cand = c;
     }
 }
 
 /* KdBuild_consider_plane for candidate c of the small root's element k. */
-inline void KdBuild_consider(int c, int k, ulong mask, int4 root, float4 lo,
-                             float4 hi, float area,
-                             const __global float4 *sel_lo,
-                             const __global float4 *sel_hi,
-                             const __global ulong2 *cand, float *best_cost,
-                             int *best_cand) {
+inline void KdBuild_consider(int c, int k, ulong mask, int4 root, const KdSahCell *cell,
+                             const __global float4 *sel_lo, const __global float4 *sel_hi,
+                             const __global ulong2 *cand, float *best_raw, int *best_cand) {
     KdBuild_consider_plane(c, (c % 6) >> 1, KdBuild_plane(sel_lo, sel_hi, root.x + k, c), cand[6 * root.x + c], mask,
-                           lo, hi, area, best_cost, best_cand);
+                           cell, best_raw, best_cand);
 }
 
 /* The six candidates of the small root's element k in order (low, high
  * face on x, then y, then z), each with its axis known where it is
  * compiled. */
-inline void KdBuild_consider_element(int k, ulong mask, int4 root, float4 lo, float4 hi, float area,
+inline void KdBuild_consider_element(int k, ulong mask, int4 root, const KdSahCell *cell,
                                      const __global float4 *sel_lo, const __global float4 *sel_hi,
-                                     const __global ulong2 *cand, float *best_cost, int *best_cand) {
+                                     const __global ulong2 *cand, float *best_raw, int *best_cand) {
     float4 e_lo = sel_lo[root.x + k], e_hi = sel_hi[root.x + k];
     const __global ulong2 *m = cand + 6 * (root.x + k);
     int c = 6 * k;
-    KdBuild_consider_plane(c, 0, e_lo.x, m[0], mask, lo, hi, area, best_cost, best_cand);
-    KdBuild_consider_plane(c + 1, 0, e_hi.x, m[1], mask, lo, hi, area, best_cost, best_cand);
-    KdBuild_consider_plane(c + 2, 1, e_lo.y, m[2], mask, lo, hi, area, best_cost, best_cand);
-    KdBuild_consider_plane(c + 3, 1, e_hi.y, m[3], mask, lo, hi, area, best_cost, best_cand);
-    KdBuild_consider_plane(c + 4, 2, e_lo.z, m[4], mask, lo, hi, area, best_cost, best_cand);
-    KdBuild_consider_plane(c + 5, 2, e_hi.z, m[5], mask, lo, hi, area, best_cost, best_cand);
+    KdBuild_consider_plane(c, 0, e_lo.x, m[0], mask, cell, best_raw, best_cand);
+    KdBuild_consider_plane(c + 1, 0, e_hi.x, m[1], mask, cell, best_raw, best_cand);
+    KdBuild_consider_plane(c + 2, 1, e_lo.y, m[2], mask, cell, best_raw, best_cand);
+    KdBuild_consider_plane(c + 3, 1, e_hi.y, m[3], mask, cell, best_raw, best_cand);
+    KdBuild_consider_plane(c + 4, 2, e_lo.z, m[4], mask, cell, best_raw, best_cand);
+    KdBuild_consider_plane(c + 5, 2, e_hi.z, m[5], mask, cell, best_raw, best_cand);
 }
 
 /* The share of lane `lane` (of KD_SAH_LANES) in small node i's search: its
- * cheapest candidate and cost (-1 and infinity where none is searched) and
- * the node's leaf cost. */
+ * cheapest candidate and raw cost (-1 and infinity where none is searched,
+ * see KdBuild_consider_plane), the factor 2 / A that makes the raw cost
+ * over C_t the SAH cost, and the node's leaf cost. */
 inline void KdBuild_search(int i, int lane, const __global int2 *sn_node, const __global ulong *sn_mask,
                            const __global int4 *small_roots, const __global float4 *rec_lo,
                            const __global float4 *rec_hi, const __global int4 *rec_info,
                            const __global float4 *sel_lo, const __global float4 *sel_hi,
-                           const __global ulong2 *cand, int max_depth, float *my_cost, int *my_cand,
-                           float *leaf_cost) {
+                           const __global ulong2 *cand, int max_depth, float *my_raw, int *my_cand,
+                           float *scale, float *leaf_cost) {
     int2 node = sn_node[i];
     ulong mask = sn_mask[i];
     int4 root = small_roots[node.x];
     float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
     float area = KdBuild_area(lo, hi);
+    *scale = 2.0f / area;
     *leaf_cost = (float)popcount(mask);
     if (rec_info[node.y].w < max_depth && area > 0.0f && *leaf_cost > KD_COST_TRAVERSE) {
+        KdSahCell cell = KdBuild_sah_cell(lo, hi);
 #if KD_SAH_LANES == 1
         /* the candidates of the node's elements only, lowest bit first */
         for (ulong left = mask; left != 0UL; left &= left - 1UL)
-            KdBuild_consider_element(popcount((left & (~left + 1UL)) - 1UL), mask, root, lo, hi, area, sel_lo,
-                                     sel_hi, cand, my_cost, my_cand);
+            KdBuild_consider_element(popcount((left & (~left + 1UL)) - 1UL), mask, root, &cell, sel_lo, sel_hi, cand,
+                                     my_raw, my_cand);
 #else
         for (int c = lane; c < 6 * root.y; c += KD_SAH_LANES) {
             int k = c / 6;
-            if (((mask >> k) & 1UL) != 0UL)
-                KdBuild_consider(c, k, mask, root, lo, hi, area, sel_lo, sel_hi, cand, my_cost, my_cand);
+            if (((mask >> k) & 1UL) != 0UL) KdBuild_consider(c, k, mask, root, &cell, sel_lo, sel_hi, cand, my_raw, my_cand);
         }
 #endif
     }
+}
+
+/* Whether a node with its cheapest candidate's raw cost splits rather
+ * than stays a leaf: C_t + raw x 2 / A below the leaf cost. */
+inline bool KdBuild_splits(float raw, float scale, float leaf_cost) {
+    return KD_COST_TRAVERSE + raw * scale < leaf_cost;
 }
 
 /* Per small node (KD_SAH_LANES work-items each, sharing its candidates):
@@ -679,8 +783,9 @@ inline void KdBuild_search(int i, int lane, const __global int2 *sn_node, const 
  * counts by popcount of the candidate's masks and the node's mask. best is
  * the candidate, or -1 where a leaf (cost: its triangle count) is cheaper
  * or the depth limit is reached; a node of at most C_t triangles is a leaf
- * at once, as no split costs less than C_t. Ties go to the lowest
- * candidate, so the choice does not depend on the lane count. The global
+ * at once, as no split costs less than C_t. The lanes compare raw costs
+ * (KdBuild_consider_plane) and ties go to the lowest candidate, so the
+ * choice does not depend on the lane count. The global
  * size is a multiple of the work-group size, itself a multiple of
  * KD_SAH_LANES. */
 __kernel void KdBuild_small_best(const __global int2 *sn_node,
@@ -693,37 +798,36 @@ __kernel void KdBuild_small_best(const __global int2 *sn_node,
                                  const __global float4 *sel_hi,
                                  const __global ulong2 *cand, const int n,
                                  const int max_depth, __global int *best) {
-    __local float cost_s[KD_SAH_GROUP];
+    __local float raw_s[KD_SAH_GROUP];
     __local int cand_s[KD_SAH_GROUP];
     int i = Launch_global_id() / KD_SAH_LANES, lane = Launch_global_id() % KD_SAH_LANES;
     int lid = get_local_id(0);
-    float my_cost = INFINITY;
+    float my_raw = INFINITY, scale = 0.0f, leaf_cost = 0.0f;
     int my_cand = -1;
-    float leaf_cost = 0.0f;
     if (i < n)
         KdBuild_search(i, lane, sn_node, sn_mask, small_roots, rec_lo, rec_hi, rec_info, sel_lo, sel_hi, cand,
-                       max_depth, &my_cost, &my_cand, &leaf_cost);
+                       max_depth, &my_raw, &my_cand, &scale, &leaf_cost);
 #if KD_SAH_LANES > 1
     /* the node's lanes agree on the cheapest, lowest candidate */
-    cost_s[lid] = my_cost;
+    raw_s[lid] = my_raw;
     cand_s[lid] = my_cand;
     barrier(CLK_LOCAL_MEM_FENCE);
     for (int s = KD_SAH_LANES / 2; s > 0; s >>= 1) {
         if (lane < s) {
-            float other = cost_s[lid + s];
+            float other = raw_s[lid + s];
             int other_cand = cand_s[lid + s];
-            if (other < cost_s[lid] || (other == cost_s[lid] && other_cand >= 0 &&
+            if (other < raw_s[lid] || (other == raw_s[lid] && other_cand >= 0 &&
                                         (cand_s[lid] < 0 || other_cand < cand_s[lid]))) {
-                cost_s[lid] = other;
+                raw_s[lid] = other;
                 cand_s[lid] = other_cand;
             }
         }
         barrier(CLK_LOCAL_MEM_FENCE);
     }
-    my_cost = cost_s[lid];
+    my_raw = raw_s[lid];
     my_cand = cand_s[lid];
 #endif
-    if (i < n && lane == 0) best[i] = my_cost < leaf_cost ? my_cand : -1;
+    if (i < n && lane == 0) best[i] = KdBuild_splits(my_raw, scale, leaf_cost) ? my_cand : -1;
 }
 
 /* Per small node: a split writes its record and two child small nodes
@@ -998,15 +1102,19 @@ __kernel void KdBuild_serial(
     int small_active = root_count;
     if (root_count > caps.s6) return;
     for (int r = 0; r < root_count; ++r) KdBuild_small_init_at(r, small_roots, sel_root, sn_node, sn_mask);
+#if KD_SORTED_MASKS
+    for (int i = 0; i < 3 * root_count; ++i) KdBuild_small_masks_sorted_at(i / 3, i % 3, small_roots, sel_lo, sel_hi, cand);
+#else
     for (int c = 0; c < 6 * small_count; ++c) KdBuild_small_masks_at(c, small_roots, sel_root, sel_lo, sel_hi, cand);
+#endif
     while (small_active) {
         small_levels++;
         for (int i = 0; i < small_active; ++i) {
-            float cost = INFINITY, leaf_cost = 0.0f;
+            float raw = INFINITY, scale = 0.0f, leaf_cost = 0.0f;
             int c = -1;
             KdBuild_search(i, 0, sn_node, sn_mask, small_roots, rec_lo, rec_hi, rec_info, sel_lo, sel_hi, cand,
-                           max_depth, &cost, &c, &leaf_cost);
-            best[i] = cost < leaf_cost ? c : -1;
+                           max_depth, &raw, &c, &scale, &leaf_cost);
+            best[i] = KdBuild_splits(raw, scale, leaf_cost) ? c : -1;
         }
         long packed = 0;
         for (int i = 0; i < small_active; ++i) {

@@ -76,15 +76,15 @@ class BuildOutput:
     stats: dict
 
 
-def programs(device: Device, sah_lanes: int | None = None) -> list[tuple[str, dict]]:
+def programs(device: Device, sah_lanes: int | None = None, sorted_masks: bool | None = None) -> list[tuple[str, dict]]:
     """The programs a build uses (for building them up front)."""
-    return [(PROGRAM, _Config(device, sah_lanes).defines)]
+    return [(PROGRAM, _Config(device, sah_lanes, sorted_masks).defines)]
 
 
 class _Config:
     """Group sizes and the program's defines on one device."""
 
-    def __init__(self, device: Device, sah_lanes: int | None):
+    def __init__(self, device: Device, sah_lanes: int | None, sorted_masks: bool | None = None):
         max_group = int(device.device.max_work_group_size)
         self.chunk_group = 1 << int(math.log2(min(CHUNK, max_group)))
         self.sah_group = 1 << int(math.log2(min(SAH_GROUP, max_group)))
@@ -95,10 +95,15 @@ class _Config:
         self.sah_lanes = min(sah_lanes, self.sah_group)
         # a CPU bounds each chunk in one work-item, other devices in a group
         self.chunk_lanes = 1 if device.is_cpu else self.chunk_group
+        # a CPU makes a small root's candidate masks from sorted bounds, one
+        # work-item per root and axis; other devices one work-item per
+        # candidate (the sorted form's private arrays were not measured there)
+        self.sorted_masks = device.is_cpu if sorted_masks is None else bool(sorted_masks)
         self.defines = {
             "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
             "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
             "KD_SAH_LANES": self.sah_lanes, "KD_CHUNK_LANES": self.chunk_lanes,
+            "KD_SORTED_MASKS": int(self.sorted_masks),
         }
 
 
@@ -130,11 +135,11 @@ class _Build:
     """The state of one build: records (nodes in creation order), leaf lists,
     small roots and their elements, as growing device arrays."""
 
-    def __init__(self, device: Device, verts: cla.Array, count: int, sah_lanes: int | None,
+    def __init__(self, device: Device, verts: cla.Array, count: int, config: _Config,
                  should_stop: Callable[[], bool] | None = None):
         self.device = device
         self.should_stop = should_stop
-        self.config = _Config(device, sah_lanes)
+        self.config = config
         self.verts = verts
         self.count = count
         self.max_depth = depth_limit(count)
@@ -335,8 +340,12 @@ class _Build:
         self.kernel("KdBuild_small_init")(roots, self.small_roots.data, i32(roots), sel_root.data, self.sn_node.data,
                                           self.sn_mask.data)
         self.cand = dev.array(6 * small, cltypes.ulong2)
-        self.kernel("KdBuild_small_masks")(6 * small, self.small_roots.data, sel_root.data, self.sel_lo.data,
-                                           self.sel_hi.data, i32(6 * small), self.cand.data)
+        if self.config.sorted_masks:
+            self.kernel("KdBuild_small_masks_sorted")(3 * roots, self.small_roots.data, self.sel_lo.data,
+                                                      self.sel_hi.data, i32(3 * roots), self.cand.data)
+        else:
+            self.kernel("KdBuild_small_masks")(6 * small, self.small_roots.data, sel_root.data, self.sel_lo.data,
+                                               self.sel_hi.data, i32(6 * small), self.cand.data)
         self.small_total = dev.array(1, np.int64)
         self.small_active = roots
         while self.small_active:
@@ -405,7 +414,8 @@ class _Build:
 
 
 def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None,
-               should_stop: Callable[[], bool] | None = None, serial_max: int | None = None) -> BuildOutput:
+               should_stop: Callable[[], bool] | None = None, serial_max: int | None = None,
+               sorted_masks: bool | None = None) -> BuildOutput:
     """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
 
     ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
@@ -413,9 +423,11 @@ def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int |
     The tree is the same whatever it is. ``should_stop`` is polled after
     every level (RenderCancelled). ``serial_max``: the largest mesh built by
     one work-item (where a node's SAH search has one lane); None: SERIAL_MAX
-    on a CPU device, else 0.
+    on a CPU device, else 0. ``sorted_masks``: the small roots' candidate
+    masks from sorted bounds (None: on a CPU device); the tree is the same.
     """
-    build = _Build(device, verts, count, sah_lanes, should_stop)
+    config = _Config(device, sah_lanes, sorted_masks)
+    build = _Build(device, verts, count, config, should_stop)
     timer = build.timer
     with timer.stage("setup"):
         build.setup()
@@ -425,7 +437,7 @@ def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int |
         with timer.stage("serial"):
             nodes = build.serial()
         if nodes is None:  # out of room: the launched build, from a fresh setup
-            build = _Build(device, verts, count, sah_lanes, should_stop)
+            build = _Build(device, verts, count, config, should_stop)
             timer = build.timer
             with timer.stage("setup"):
                 build.setup()

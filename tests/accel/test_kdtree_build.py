@@ -367,6 +367,20 @@ def test_sah_search_makes_the_same_tree_with_any_lane_count(device, lanes):
     assert_same_tree(other, reference)
 
 
+@pytest.mark.parametrize("name", sorted(set(SCENES) - {"stack"}))  # the stack has no small root
+@pytest.mark.parametrize("serial_max", [0, 1 << 30], ids=["launched", "one_work_item"])
+def test_candidate_masks_from_sorted_bounds_make_the_same_tree(device, name, serial_max):
+    """A CPU's masks (two sorts and a binary search per candidate) against a
+    GPU's (each candidate against every element of its root): the same
+    records, tree and leaf lists, on scenes full of ties and of triangles
+    flat in a split plane (the box grid, the fan)."""
+    verts_dev, count = device_verts(device, SCENES[name]())
+    by_sort = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max, sorted_masks=True)
+    by_candidate = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max, sorted_masks=False)
+    assert by_sort.stats["small_roots"] > 0
+    assert_same_tree(by_sort, by_candidate)
+
+
 @pytest.mark.parametrize("name", sorted(SCENES) + ["one_triangle", "small_root", "one_above"])
 def test_the_one_work_item_build_makes_the_level_by_level_tree(device, name):
     """The same steps in the same order: the same records, tree and leaf
