@@ -703,8 +703,10 @@ inline void KdBuild_consider_plane(int c, int axis, float plane, ulong2 m, ulong
                                    float *best_raw, int *best_cand) {
     float lo = Axis_of(cell->lo, axis), hi = Axis_of(cell->hi, axis);
     if (!(lo < plane && plane < hi)) return;
-    float below = (float)popcount(m.x & mask);
-    float above = (float)popcount(m.y & mask);
+    /* counts through int: a ulong's conversion to float is a slow sequence
+     * on a CPU (Intel's runtime: the kernel 30 ms against 45) */
+    float below = (float)(int)popcount(m.x & mask);
+    float above = (float)(int)popcount(m.y & mask);
     float cap = Axis_of(cell->cap, axis), side = Axis_of(cell->side, axis);
     float raw = below * (cap + (plane - lo) * side) + above * (cap + (hi - plane) * side);
     if (raw < *best_raw) {
@@ -754,7 +756,7 @@ inline void KdBuild_search(int i, int lane, const __global int2 *sn_node, const 
     float4 lo = rec_lo[node.y], hi = rec_hi[node.y];
     float area = KdBuild_area(lo, hi);
     *scale = 2.0f / area;
-    *leaf_cost = (float)popcount(mask);
+    *leaf_cost = (float)(int)popcount(mask);
     if (rec_info[node.y].w < max_depth && area > 0.0f && *leaf_cost > KD_COST_TRAVERSE) {
         KdSahCell cell = KdBuild_sah_cell(lo, hi);
 #if KD_SAH_LANES == 1
