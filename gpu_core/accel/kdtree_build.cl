@@ -23,6 +23,7 @@
 #include "device/launch.h"
 #include "device/structs.h"
 #include "accel/kdtree_clip.h"
+#include "device/sort_small.h"
 
 /* How a large node is divided (bits 2.. of its mode; bits 0..1: axis). The
  * "low" rule puts elements lying in the plane above it, "high" below. */
@@ -589,23 +590,6 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
     if (c < n) KdBuild_small_masks_at(c, small_roots, sel_root, sel_lo, sel_hi, cand);
 }
 
-/* The n values v[4 k] (one coordinate of n float4 bounds) sorted into
- * c, ascending, with their element numbers in order (a stable insertion
- * sort: ties by element). */
-inline void KdBuild_sort_coordinate(const __global float *v, int n, float *c, int *order) {
-    for (int i = 0; i < n; ++i) {
-        float x = v[4 * i];
-        int k = i;
-        while (k > 0 && c[k - 1] > x) {
-            c[k] = c[k - 1];
-            order[k] = order[k - 1];
-            k--;
-        }
-        c[k] = x;
-        order[k] = i;
-    }
-}
-
 /* How many of the sorted values c (KD_SMALL of them, those past the
  * elements +infinity) are below p, or at most p where `inclusive`: a
  * binary search by halving steps, with selects (its branches would go
@@ -637,8 +621,8 @@ inline void KdBuild_small_masks_sorted_at(int r, int axis, const __global int4 *
     const __global float *hi = (const __global float *)(sel_hi + root.x) + axis;
     float lo_sorted[KD_SMALL], hi_sorted[KD_SMALL];
     int lo_order[KD_SMALL], hi_order[KD_SMALL];
-    KdBuild_sort_coordinate(lo, n, lo_sorted, lo_order);
-    KdBuild_sort_coordinate(hi, n, hi_sorted, hi_order);
+    SortSmall_coordinate(lo, n, lo_sorted, lo_order);
+    SortSmall_coordinate(hi, n, hi_sorted, hi_order);
     for (int j = n; j < KD_SMALL; ++j) lo_sorted[j] = hi_sorted[j] = INFINITY;
     /* below[j]: the j lowest by lo; above[j]: all but the j lowest by hi */
     ulong below[KD_SMALL + 1], above[KD_SMALL + 1];

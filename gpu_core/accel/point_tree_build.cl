@@ -19,6 +19,7 @@
  * traversal nodes, node payloads and points in leaf order. */
 #include "device/launch.h"
 #include "device/axis.h"
+#include "device/sort_small.h"
 #include "accel/point_tree.h"
 
 /* axis value of a node whose points are all identical: split by count */
@@ -423,17 +424,7 @@ inline void PointBuild_small_root_at(int r, const __global int *roots, __global 
     float c[POINT_BUILD_SMALL];
     int order[POINT_BUILD_SMALL];
     for (int a = 0; a < 3; ++a) {
-        for (int i = 0; i < n; ++i) {
-            float v = Axis_of(pts[nd.start + i], a);
-            int k = i;
-            while (k > 0 && c[k - 1] > v) {
-                c[k] = c[k - 1];
-                order[k] = order[k - 1];
-                k--;
-            }
-            c[k] = v;
-            order[k] = i;
-        }
+        SortSmall_coordinate((const __global float *)(pts + nd.start) + a, n, c, order);
         uint m = 0u;
         for (int k = 0; k < n; ++k) {
             m |= 1u << order[k];

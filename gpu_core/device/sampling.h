@@ -13,31 +13,22 @@ inline void Sampling_frame(float3 n, float3 *t, float3 *b) {
     *b = (float3)(c, s + n.y * n.y * a, -n.y);
 }
 
-/* Cosine and sine of a sampled angle: the native functions where the
- * device's are accurate to a few ulp (PoCL; programs.py defines
- * GPUGI_NATIVE_TRIG there), at a third of the accurate ones' cost; the
- * accurate ones elsewhere (Intel's CPU runtime's native pair errs by
- * 1.5e-4, which left cosine-sampled directions in the surface's plane). */
-inline float Sampling_cos(float x) {
+/* (cos, sin) of a sampled angle: the native functions where the device's
+ * are accurate to a few ulp (PoCL; programs.py defines GPUGI_NATIVE_TRIG
+ * there), at a third of the accurate ones' cost; the accurate ones
+ * elsewhere (Intel's CPU runtime's native pair errs by 1.5e-4, which left
+ * cosine-sampled directions in the surface's plane). */
+inline float2 Sampling_cos_sin(float x) {
 #ifdef GPUGI_NATIVE_TRIG
-    return native_cos(x);
+    return (float2)(native_cos(x), native_sin(x));
 #else
-    return cos(x);
-#endif
-}
-
-inline float Sampling_sin(float x) {
-#ifdef GPUGI_NATIVE_TRIG
-    return native_sin(x);
-#else
-    return sin(x);
+    return (float2)(cos(x), sin(x));
 #endif
 }
 
 /* (cos, sin) of the angle 2 pi u of a sample. */
 inline float2 Sampling_turn(float u) {
-    float phi = 2.0f * PI_F * u;
-    return (float2)(Sampling_cos(phi), Sampling_sin(phi));
+    return Sampling_cos_sin(2.0f * PI_F * u);
 }
 
 /* Point in the unit disk (polar mapping). */

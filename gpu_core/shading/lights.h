@@ -149,7 +149,7 @@ inline bool Light_rect_from(const Light *l, float3 x, LightRect *r) {
 
 /* Rectangle light: a direction uniform in its solid angle, by inverting
  * the solid angle cumulative along x, then along y. The angle's cosine and
- * sine are Sampling_turn's (the native pair on PoCL, where the accurate one
+ * sine are Sampling_cos_sin's (the native pair on PoCL, where the accurate one
  * with its argument reduction took 6% of a Cornell-box image). With
  * g = 1 / cos^2 of the sampled edge angle, the x of the sampled line is
  * |z0| / sqrt(g - 1) with the sign of fu, and distances stay squared until
@@ -158,7 +158,8 @@ inline bool Light_rect_from(const Light *l, float3 x, LightRect *r) {
 inline void Light_sample_rect_solid_angle(const Light *l, const LightRect *r, float3 x, float u1, float u2,
                                           LightSample *s) {
     float au = u1 * r->solid + PI_F - r->a[2] - r->a[3];
-    float fu = (Sampling_cos(au) * r->nz[0] - r->nz[2]) / Sampling_sin(au);
+    float2 cs = Sampling_cos_sin(au);
+    float fu = (cs.x * r->nz[0] - r->nz[2]) / cs.y;
     float g = fu * fu + r->nz[0] * r->nz[0];
     float z0 = r->z0;
     float xu = clamp(copysign(z0, fu) / sqrt(fmax(g - 1.0f, 1e-14f)), r->x0, r->x1); /* z0 < 0 */

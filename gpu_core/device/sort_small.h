@@ -1,0 +1,23 @@
+/* Sorting the few elements of one small node in one work-item, as the
+ * kd-tree builders' small-node stages do. */
+#ifndef GPUGI_SORT_SMALL_H
+#define GPUGI_SORT_SMALL_H
+
+/* The n values v[4 i] (one coordinate of n float4) sorted into c,
+ * ascending, with their element numbers in `order` (a stable insertion
+ * sort: ties by element number). */
+inline void SortSmall_coordinate(const __global float *v, int n, float *c, int *order) {
+    for (int i = 0; i < n; ++i) {
+        float x = v[4 * i];
+        int k = i;
+        while (k > 0 && c[k - 1] > x) {
+            c[k] = c[k - 1];
+            order[k] = order[k - 1];
+            k--;
+        }
+        c[k] = x;
+        order[k] = i;
+    }
+}
+
+#endif
