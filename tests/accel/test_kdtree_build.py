@@ -367,14 +367,40 @@ def test_sah_search_makes_the_same_tree_with_any_lane_count(device, lanes):
     assert_same_tree(other, reference)
 
 
-@pytest.mark.parametrize("name", sorted(set(SCENES) - {"stack"}))  # the stack has no small root
+def flat_lattice(n, seed=12):
+    """Axis-aligned flat triangles with corners on a small integer lattice:
+    bounds tie everywhere and lie in one another's planes."""
+    rng = np.random.default_rng(seed)
+    tris = rng.integers(0, 6, (n, 3, 3)).astype(np.float32)
+    axis = rng.integers(0, 3, n)
+    tris[np.arange(n), :, axis] = tris[np.arange(n), 0, axis][:, None]
+    return tris
+
+
+def degenerate_soup(n, seed=13):
+    """Points, segments and repeated triangles among ordinary ones."""
+    rng = np.random.default_rng(seed)
+    tris = rng.normal(size=(n, 3, 3)).astype(np.float32)
+    kind = rng.integers(0, 3, n)
+    tris[kind == 0, 1] = tris[kind == 0, 2] = tris[kind == 0, 0]
+    tris[kind == 1, 2] = tris[kind == 1, 1]
+    tris[: n // 4] = tris[rng.integers(0, n, n // 4)]
+    return tris
+
+
+MASK_SCENES = {**{k: v for k, v in SCENES.items() if k != "stack"},  # the stack has no small root
+               "flat_lattice": lambda: flat_lattice(1500), "degenerate_soup": lambda: degenerate_soup(1500)}
+
+
+@pytest.mark.parametrize("name", sorted(MASK_SCENES))
 @pytest.mark.parametrize("serial_max", [0, 1 << 30], ids=["launched", "one_work_item"])
 def test_candidate_masks_from_sorted_bounds_make_the_same_tree(device, name, serial_max):
     """A CPU's masks (two sorts and a binary search per candidate) against a
     GPU's (each candidate against every element of its root): the same
     records, tree and leaf lists, on scenes full of ties and of triangles
-    flat in a split plane (the box grid, the fan)."""
-    verts_dev, count = device_verts(device, SCENES[name]())
+    flat in a split plane (the box grid, the fan, the lattice) and of
+    degenerate ones."""
+    verts_dev, count = device_verts(device, MASK_SCENES[name]())
     by_sort = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max, sorted_masks=True)
     by_candidate = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max, sorted_masks=False)
     assert by_sort.stats["small_roots"] > 0
