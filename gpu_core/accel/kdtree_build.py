@@ -76,9 +76,9 @@ class BuildOutput:
     stats: dict
 
 
-def programs(device: Device, sah_lanes: int | None = None, sorted_masks: bool | None = None) -> list[tuple[str, dict]]:
+def programs(device: Device, sah_lanes: int | None = None) -> list[tuple[str, dict]]:
     """The programs a build uses (for building them up front)."""
-    return [(PROGRAM, _Config(device, sah_lanes, sorted_masks).defines)]
+    return [(PROGRAM, _Config(device, sah_lanes).defines)]
 
 
 class _Config:

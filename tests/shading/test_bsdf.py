@@ -34,12 +34,18 @@ def view(cos_theta: float) -> np.ndarray:
 UP = np.array([0.0, 0.0, 1.0, 0.0], np.float32)
 
 
-def sample(device, row, wo, n, entering=True, seed=1, ns=UP):
+def sample(device, row, wo, n, entering=True, seed=1, ns=UP, u=None):
     """n sampled directions (N, 3), labels, weights (N, 3), pdfs, on a
-    surface of geometric normal +z and shading normal ``ns``."""
+    surface of geometric normal +z and shading normal ``ns``: from the
+    random stream of ``seed``, or from the given numbers ``u`` ((n, 4):
+    lobe, u1, u2, u3)."""
     out_dir, out_weight = device.empty(16 * n), device.empty(16 * n)
-    device.kernel(PROGRAM, "BsdfCheck_sample")(n, device.to_device(row), wo, ns, np.int32(entering),
-                                               np.int32(SAMPLE_ALL), np.uint32(seed), np.int32(n), out_dir, out_weight)
+    head = (device.to_device(row), wo, ns, np.int32(entering), np.int32(SAMPLE_ALL))
+    if u is None:
+        device.kernel(PROGRAM, "BsdfCheck_sample")(n, *head, np.uint32(seed), np.int32(n), out_dir, out_weight)
+    else:
+        device.kernel(PROGRAM, "BsdfCheck_sample_at")(n, *head, device.to_device(np.asarray(u, np.float32)),
+                                                      np.int32(n), out_dir, out_weight)
     d = device.read(out_dir, (n, 4), np.float32)
     w = device.read(out_weight, (n, 4), np.float32)
     return d[:, :3].astype(np.float64), d[:, 3].astype(int), w[:, :3].astype(np.float64), w[:, 3].astype(np.float64)
@@ -417,17 +423,11 @@ def test_diffuse_samples_at_the_disk_rim_leave_above_the_surface(device):
     u2 = (np.arange(4096) + 0.5) / 4096
     u = np.zeros((len(u1) * len(u2), 4), np.float32)
     u[:, 1], u[:, 2] = np.repeat(u1, len(u2)), np.tile(u2, len(u1))
-    n = len(u)
-    out_dir, out_weight = device.empty(16 * n), device.empty(16 * n)
-    device.kernel(PROGRAM, "BsdfCheck_sample_at")(n, device.to_device(material(base_color=(0.8, 0.8, 0.8))), view(0.6),
-                                                  UP, np.int32(1), np.int32(SAMPLE_ALL), device.to_device(u),
-                                                  np.int32(n), out_dir, out_weight)
-    d = device.read(out_dir, (n, 4), np.float32).astype(np.float64)
-    w = device.read(out_weight, (n, 4), np.float32).astype(np.float64)
-    assert (d[:, 3] == LABEL_DIFFUSE).all()
-    assert (d[:, 2] > 0).all() and (w[:, 3] > 0).all()
-    np.testing.assert_allclose(np.linalg.norm(d[:, :3], axis=1), 1.0, atol=1e-5)
-    np.testing.assert_allclose(w[:, :3], 0.8, rtol=1e-4)
+    wi, label, weight, pdf = sample(device, material(base_color=(0.8, 0.8, 0.8)), view(0.6), len(u), u=u)
+    assert (label == LABEL_DIFFUSE).all()
+    assert (wi[:, 2] > 0).all() and (pdf > 0).all()
+    np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1.0, atol=1e-5)
+    np.testing.assert_allclose(weight, 0.8, rtol=1e-4)
 
 
 def test_roughness_below_the_singular_bound_is_a_perfect_mirror(device):
