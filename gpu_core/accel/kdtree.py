@@ -140,11 +140,12 @@ def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool]
     with timer.stage("upload"):
         verts = float4_rows(tris.reshape(-1, 3)) if count else np.zeros((3, 4), np.float32)
         verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
+    want_blocks = kdtree_blocks.wanted(device) if blocks is None else blocks
     with timer.stage("build"):
-        out = build_tree(device, verts_dev, count, should_stop=should_stop)
+        out = build_tree(device, verts_dev, count, should_stop=should_stop, blocks=want_blocks)
     with timer.stage("blocks"):
         block_array = None
-        if kdtree_blocks.wanted(device) if blocks is None else blocks:
+        if want_blocks:
             block_array = kdtree_blocks.make(device, out.nodes, out.leaf_tris, verts_dev, int(out.stats["nodes"]))
     stats = dict(out.stats)
     stats["ms"] = {"upload": timer.ms["upload"], **out.stats["ms"], "blocks": timer.ms["blocks"]}

@@ -15,7 +15,8 @@ a bound and reads its own count on the device):
 * small-node stage: candidate planes and their 64-bit side masks per small
   root, the SAH of every candidate of every node (a work-item per node on a
   CPU, a work-group per node elsewhere), a leaf where not splitting is
-  cheaper;
+  cheaper (a node step weighed against the way leaves will be tested:
+  ``cost_traverse``);
 * output stage: subtree sizes bottom-up, preorder addresses top-down, then
   the ``KdNode`` array (device/layout.py) and the leaf triangle lists.
 
@@ -42,11 +43,15 @@ from ..device.constants import KD_MAX_DEPTH as MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE
 from ..device.timer import StageTimer
 from ..errors import check_stop
+from . import kdtree_blocks
 
 CHUNK = 256  # elements per chunk of the large-node stage
 SMALL = 64  # largest small node (the width of its element mask)
 EMPTY_RATIO = 0.25  # empty fraction of a side that is cut off
-COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests
+COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests, where leaves test triangles one by one
+# the same where leaves test them four at a time from blocks (kdtree_blocks.py): a CPU traced fastest at 8-10
+# (bench/kdtree.py: larger leaves, a quarter of the nodes; one by one, 1 was fastest)
+COST_TRAVERSE_BLOCKS = 8.0
 BAD_SPLITS = 2  # median splits in a row without progress allowed before a large node is a leaf (fans, stacks)
 SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
@@ -81,10 +86,16 @@ def programs(device: Device, sah_lanes: int | None = None) -> list[tuple[str, di
     return [(PROGRAM, _Config(device, sah_lanes).defines)]
 
 
+def cost_traverse(blocks: bool) -> float:
+    """The SAH cost of a node step for a tree whose leaves get blocks or not."""
+    return COST_TRAVERSE_BLOCKS if blocks else COST_TRAVERSE
+
+
 class _Config:
     """Group sizes and the program's defines on one device."""
 
-    def __init__(self, device: Device, sah_lanes: int | None, sorted_masks: bool | None = None):
+    def __init__(self, device: Device, sah_lanes: int | None, sorted_masks: bool | None = None,
+                 blocks: bool | None = None):
         max_group = int(device.device.max_work_group_size)
         self.chunk_group = 1 << int(math.log2(min(CHUNK, max_group)))
         self.sah_group = 1 << int(math.log2(min(SAH_GROUP, max_group)))
@@ -99,9 +110,11 @@ class _Config:
         # work-item per root and axis; other devices one work-item per
         # candidate (the sorted form's private arrays were not measured there)
         self.sorted_masks = device.is_cpu if sorted_masks is None else bool(sorted_masks)
+        # the SAH weighs a node step against how its leaves will be tested
+        self.cost_traverse = cost_traverse(kdtree_blocks.wanted(device) if blocks is None else bool(blocks))
         self.defines = {
             "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
-            "KD_COST_TRAVERSE": f"{COST_TRAVERSE!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
+            "KD_COST_TRAVERSE": f"{self.cost_traverse!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
             "KD_SAH_LANES": self.sah_lanes, "KD_CHUNK_LANES": self.chunk_lanes,
             "KD_SORTED_MASKS": int(self.sorted_masks),
         }
@@ -406,7 +419,7 @@ class _Build:
         d = (self.hi - self.lo)[:3].astype(np.float64)
         root_area = 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0])
         return {
-            "nodes": n, "leaves": leaves, "depth": depth,
+            "nodes": n, "leaves": leaves, "depth": depth, "cost_traverse": self.config.cost_traverse,
             "mean_leaf_size": leaf_sum / leaves if leaves else 0.0, "max_leaf_size": leaf_max,
             "leaf_references": leaf_sum, "sah_cost": sah / root_area if root_area > 0 else float(leaf_sum),
             "large_levels": self.large_levels, "small_roots": self.root_count, "small_levels": self.small_levels,
@@ -415,7 +428,7 @@ class _Build:
 
 def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None,
                should_stop: Callable[[], bool] | None = None, serial_max: int | None = None,
-               sorted_masks: bool | None = None) -> BuildOutput:
+               sorted_masks: bool | None = None, blocks: bool | None = None) -> BuildOutput:
     """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
 
     ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
@@ -425,8 +438,11 @@ def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int |
     one work-item (where a node's SAH search has one lane); None: SERIAL_MAX
     on a CPU device, else 0. ``sorted_masks``: the small roots' candidate
     masks from sorted bounds (None: on a CPU device); the tree is the same.
+    ``blocks``: whether its leaves will get blocks (None: where the device
+    wants them, kdtree_blocks.wanted), which sets the SAH's cost of a node
+    step (cost_traverse).
     """
-    config = _Config(device, sah_lanes, sorted_masks)
+    config = _Config(device, sah_lanes, sorted_masks, blocks)
     build = _Build(device, verts, count, config, should_stop)
     timer = build.timer
     with timer.stage("setup"):

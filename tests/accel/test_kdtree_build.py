@@ -14,7 +14,8 @@ import pytest
 from pyopencl import cltypes
 
 from gpu_core.accel import kdtree, kdtree_build
-from gpu_core.accel.kdtree_build import BAD_SPLITS, COST_TRAVERSE, SAH_GROUP, SMALL, build_tree, depth_limit
+from gpu_core.accel.kdtree_build import (BAD_SPLITS, COST_TRAVERSE_BLOCKS, SAH_GROUP, SMALL, build_tree, cost_traverse,
+                                         depth_limit)
 
 MARGIN = 1e-5  # leaf cells shrink by this fraction of the scene size before the overlap test
 
@@ -87,10 +88,13 @@ SCENES = {
 }
 
 
-@pytest.fixture(scope="module", params=sorted(SCENES))
+@pytest.fixture(scope="module", params=[(name, blocks) for name in sorted(SCENES) for blocks in (True, False)],
+                ids=lambda p: f"{p[0]}-{'blocks' if p[1] else 'one_by_one'}")
 def built(request, device):
-    tris = SCENES[request.param]()
-    return tris, kdtree.build(device, tris)
+    """A scene and its tree, built for leaves tested from blocks or one triangle at a time (the SAH differs)."""
+    name, blocks = request.param
+    tris = SCENES[name]()
+    return tris, kdtree.build(device, tris, blocks=blocks)
 
 
 # ---- host walk of the node array ----------------------------------------------------------
@@ -281,7 +285,7 @@ def test_sah_cost_matches_the_cells_of_the_walk(built):
     d = hi - lo
     area = 2.0 * (d[:, 0] * d[:, 1] + d[:, 1] * d[:, 2] + d[:, 2] * d[:, 0])
     leaf = nodes["axis"] == kdtree.LEAF
-    cost = np.where(leaf, nodes["count"], COST_TRAVERSE) * area
+    cost = np.where(leaf, nodes["count"], tree.stats["cost_traverse"]) * area
     assert tree.stats["sah_cost"] == pytest.approx(cost.sum() / area[0], rel=1e-3)
 
 
@@ -333,12 +337,23 @@ def test_an_object_over_a_wide_floor_keeps_small_leaves(device):
     assert stats["max_leaf_size"] <= SMALL // 2  # a leaf of the whole ball would hold 1,024
 
 
-def test_leaves_stay_small_where_triangles_are_separable(device):
-    # well-separated tiny triangles: the SAH should isolate them in few-triangle leaves
+@pytest.mark.parametrize("blocks, largest_mean", [(False, 4.0), (True, 2 * COST_TRAVERSE_BLOCKS)])
+def test_leaves_stay_small_where_triangles_are_separable(device, blocks, largest_mean):
+    # well-separated tiny triangles: the SAH should isolate them in leaves
+    # of a few triangles, more where a leaf's triangles are tested four at a time
     tris = random_soup(4000, seed=6, size=0.001)
-    stats = kdtree.build(device, tris).stats
-    assert stats["mean_leaf_size"] <= 4.0
+    stats = kdtree.build(device, tris, blocks=blocks).stats
+    assert stats["mean_leaf_size"] <= largest_mean
     assert stats["leaf_references"] <= 2 * len(tris)
+
+
+def test_a_tree_built_for_blocks_weighs_node_steps_more_and_has_fewer_larger_leaves(device):
+    tris = random_soup(4000, seed=6, size=0.02)
+    one_by_one, blocked = (kdtree.build(device, tris, blocks=b).stats for b in (False, True))
+    assert (one_by_one["cost_traverse"], blocked["cost_traverse"]) == (cost_traverse(False), cost_traverse(True))
+    assert cost_traverse(True) > cost_traverse(False)
+    assert blocked["leaves"] < one_by_one["leaves"] / 2
+    assert blocked["mean_leaf_size"] > 2 * one_by_one["mean_leaf_size"]
 
 
 def device_verts(device, tris):
