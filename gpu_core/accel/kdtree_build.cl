@@ -590,28 +590,32 @@ __kernel void KdBuild_small_masks(const __global int4 *small_roots,
     if (c < n) KdBuild_small_masks_at(c, small_roots, sel_root, sel_lo, sel_hi, cand);
 }
 
-/* How many of the sorted values c (KD_SMALL of them, those past the
- * elements +infinity) are below p, or at most p where `inclusive`: a
- * binary search by halving steps, with selects (its branches would go
- * either way at random). */
-inline int KdBuild_count_below(const float *c, float p, bool inclusive) {
-    int count = 0;
-    for (int step = KD_SMALL; step > 0; step >>= 1) {
-        int next = min(count + step, KD_SMALL);
-        float v = c[next - 1];
-        count = (v < p || (inclusive && v == p)) ? next : count;
+/* The masks of candidate e on one axis and side (plane p): below the
+ * elements of mask b, above those of mask a, and an element flat in the
+ * plane (lo >= p >= hi, only ever one of the `flat` ones) on the side
+ * KdBuild_sides gives it: above under the low rule (side 0), below under
+ * the high rule. */
+inline void KdBuild_store_masks(int e, int axis, int side, float p, ulong b, ulong a, ulong flat,
+                                const __global float *lo, const __global float *hi, int4 root, __global ulong2 *cand) {
+    ulong in_plane = 0UL;
+    for (ulong left = flat; left != 0UL; left &= left - 1UL) {
+        int k = popcount((left & (~left + 1UL)) - 1UL);
+        in_plane |= (ulong)(lo[4 * k] >= p && hi[4 * k] <= p) << k;
     }
-    return count;
+    cand[6 * (root.x + e) + 2 * axis + side] = side ? (ulong2)(b | in_plane, a) : (ulong2)(b, a | in_plane);
 }
 
 /* KdBuild_small_masks_at for the 2 n candidates of small root r on one
  * axis at once (a CPU's form: a root's O(n^2) comparisons become two
- * sorts and a binary search per candidate). By KdBuild_sides, an element
- * is below a plane p where lo < p (the low rule) and above it where
- * hi > p, which are prefixes of the elements sorted by lo and suffixes of
- * those sorted by hi; and an element with lo >= p >= hi (flat in the
- * plane, only ever one with lo >= hi) goes above under the low rule,
- * below under the high rule. The same masks bit for bit. */
+ * sorts and two sweeps). By KdBuild_sides, an element is below a plane p
+ * where lo < p (the low rule) and above it where hi > p, which are
+ * prefixes of the elements sorted by lo and suffixes of those sorted by
+ * hi; elements flat in the plane are placed by KdBuild_store_masks. The
+ * planes at the low faces are met in the order of the lo sort, those at
+ * the high faces in the order of the hi sort, so each count (values below
+ * p, or at most p) is a pointer that only moves forward. The hi sort
+ * starts from the lo sort's order, which a mesh's small triangles nearly
+ * keep. The same masks bit for bit as the per-candidate form. */
 inline void KdBuild_small_masks_sorted_at(int r, int axis, const __global int4 *small_roots,
                                           const __global float4 *sel_lo, const __global float4 *sel_hi,
                                           __global ulong2 *cand) {
@@ -622,8 +626,7 @@ inline void KdBuild_small_masks_sorted_at(int r, int axis, const __global int4 *
     float lo_sorted[KD_SMALL], hi_sorted[KD_SMALL];
     int lo_order[KD_SMALL], hi_order[KD_SMALL];
     SortSmall_coordinate(lo, n, lo_sorted, lo_order);
-    SortSmall_coordinate(hi, n, hi_sorted, hi_order);
-    for (int j = n; j < KD_SMALL; ++j) lo_sorted[j] = hi_sorted[j] = INFINITY;
+    SortSmall_coordinate_in(hi, n, lo_order, hi_sorted, hi_order);
     /* below[j]: the j lowest by lo; above[j]: all but the j lowest by hi */
     ulong below[KD_SMALL + 1], above[KD_SMALL + 1];
     below[0] = 0UL;
@@ -634,18 +637,22 @@ inline void KdBuild_small_masks_sorted_at(int r, int axis, const __global int4 *
     }
     ulong flat = 0UL;
     for (int k = 0; k < n; ++k) flat |= (ulong)(lo[4 * k] >= hi[4 * k]) << k;
-    for (int e = 0; e < n; ++e) {
-        for (int side = 0; side < 2; ++side) {
-            float p = side ? hi[4 * e] : lo[4 * e];
-            ulong in_plane = 0UL;
-            for (ulong left = flat; left != 0UL; left &= left - 1UL) {
-                int k = popcount((left & (~left + 1UL)) - 1UL);
-                in_plane |= (ulong)(lo[4 * k] >= p && hi[4 * k] <= p) << k;
-            }
-            ulong b = below[KdBuild_count_below(lo_sorted, p, false)];
-            ulong a = above[KdBuild_count_below(hi_sorted, p, true)];
-            cand[6 * (root.x + e) + 2 * axis + side] = side ? (ulong2)(b | in_plane, a) : (ulong2)(b, a | in_plane);
-        }
+    /* low faces: lo values below p start the run of p's ties; hi values at most p */
+    int run = 0, h = 0;
+    for (int j = 0; j < n; ++j) {
+        float p = lo_sorted[j];
+        if (j == 0 || lo_sorted[j - 1] < p) run = j;
+        while (h < n && hi_sorted[h] <= p) h++;
+        KdBuild_store_masks(lo_order[j], axis, 0, p, below[run], above[h], flat, lo, hi, root, cand);
+    }
+    /* high faces: lo values below p; hi values at most p end the run of p's ties */
+    int l = 0;
+    h = 0;
+    for (int j = 0; j < n; ++j) {
+        float p = hi_sorted[j];
+        while (l < n && lo_sorted[l] < p) l++;
+        while (h < n && hi_sorted[h] <= p) h++;
+        KdBuild_store_masks(hi_order[j], axis, 1, p, below[l], above[h], flat, lo, hi, root, cand);
     }
 }
 

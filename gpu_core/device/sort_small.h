@@ -20,4 +20,21 @@ inline void SortSmall_coordinate(const __global float *v, int n, float *c, int *
     }
 }
 
+/* The same for the n values v[4 seq[i]], inserted in the order of seq
+ * (ties in that order): few moves where seq nearly sorts them already. */
+inline void SortSmall_coordinate_in(const __global float *v, int n, const int *seq, float *c, int *order) {
+    for (int i = 0; i < n; ++i) {
+        int e = seq[i];
+        float x = v[4 * e];
+        int k = i;
+        while (k > 0 && c[k - 1] > x) {
+            c[k] = c[k - 1];
+            order[k] = order[k - 1];
+            k--;
+        }
+        c[k] = x;
+        order[k] = e;
+    }
+}
+
 #endif

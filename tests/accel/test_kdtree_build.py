@@ -410,7 +410,7 @@ MASK_SCENES = {**{k: v for k, v in SCENES.items() if k != "stack"},  # the stack
 @pytest.mark.parametrize("name", sorted(MASK_SCENES))
 @pytest.mark.parametrize("serial_max", [0, 1 << 30], ids=["launched", "one_work_item"])
 def test_candidate_masks_from_sorted_bounds_make_the_same_tree(device, name, serial_max):
-    """A CPU's masks (two sorts and a binary search per candidate) against a
+    """A CPU's masks (two sorts and two sweeps per root and axis) against a
     GPU's (each candidate against every element of its root): the same
     records, tree and leaf lists, on scenes full of ties and of triangles
     flat in a split plane (the box grid, the fan, the lattice) and of
@@ -420,6 +420,40 @@ def test_candidate_masks_from_sorted_bounds_make_the_same_tree(device, name, ser
     by_candidate = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max, sorted_masks=False)
     assert by_sort.stats["small_roots"] > 0
     assert_same_tree(by_sort, by_candidate)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_candidate_masks_from_sorted_bounds_match_each_candidate_against_every_element(device, seed):
+    """The two mask kernels side by side, mask for mask, on small roots of 1
+    to 64 elements whose bounds lie on a small lattice: ties among low
+    faces, among high faces and across them, elements flat in a plane,
+    repeated elements (a tree comparison would miss a wrong mask that only
+    loses the SAH search)."""
+    rng = np.random.default_rng(seed)
+    sizes = [1, 2, 3, 7, 16, 33, 63, 64, *rng.integers(1, SMALL + 1, 8)]
+    lo = rng.integers(0, 5, (sum(sizes), 4)).astype(np.float32)
+    hi = lo + rng.integers(0, 3, lo.shape).astype(np.float32)  # a third of the extents flat
+    repeat = rng.random(len(lo)) < 0.2
+    lo[repeat], hi[repeat] = lo[0], hi[0]
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    roots = np.zeros((len(sizes), 4), np.int32)
+    roots[:, 0], roots[:, 1] = first, sizes
+    sel_root = np.repeat(np.arange(len(sizes), dtype=np.int32), sizes)
+    program, defines = kdtree_build.programs(device)[0]
+    roots_d, sel_root_d = device.to_device(roots), device.to_device(sel_root)
+    lo_d, hi_d = device.to_device(lo), device.to_device(hi)
+    masks = {}
+    for sorted_form in (True, False):
+        cand = device.empty(16 * 6 * len(lo))
+        if sorted_form:
+            device.kernel(program, "KdBuild_small_masks_sorted", defines)(
+                3 * len(sizes), roots_d, lo_d, hi_d, np.int32(3 * len(sizes)), cand)
+        else:
+            device.kernel(program, "KdBuild_small_masks", defines)(
+                6 * len(lo), roots_d, sel_root_d, lo_d, hi_d, np.int32(6 * len(lo)), cand)
+        masks[sorted_form] = device.read(cand, (len(lo), 6, 2), np.uint64)
+    assert masks[False].any()
+    np.testing.assert_array_equal(masks[True], masks[False])
 
 
 @pytest.mark.parametrize("name", sorted(SCENES) + ["one_triangle", "small_root", "one_above"])
