@@ -80,11 +80,10 @@ class KdTree:
         does not hit it. With ``barycentrics``, also ``(N, 2)`` weights of
         each hit triangle's second and third corners.
         """
-        n, org, dirs, rng = self._rays(origins, directions, t_min, t_max)
+        n, rays = self._rays(origins, directions, t_min, t_max)
         dev = self.device
         t_out, tri_out, uv_out = dev.empty(4 * n), dev.empty(4 * n), dev.empty(8 * n)
-        dev.kernel(_PROGRAM, "KdQuery_closest")(
-            n, *self.kernel_args(), org, dirs, rng, t_out, tri_out, uv_out, np.int32(n))
+        dev.kernel(_PROGRAM, "KdQuery_closest")(n, *self.kernel_args(), *rays, t_out, tri_out, uv_out, np.int32(n))
         t, tri = dev.read(t_out, n, np.float32), dev.read(tri_out, n, np.int32)
         t[tri < 0] = np.inf
         if barycentrics:
@@ -93,36 +92,30 @@ class KdTree:
 
     def occluded(self, origins, directions, t_max, *, t_min=None) -> np.ndarray:
         """Whether anything lies along each ray between ``t_min`` and ``t_max``."""
-        n, org, dirs, rng = self._rays(origins, directions, t_min, t_max)
+        n, rays = self._rays(origins, directions, t_min, t_max)
         dev = self.device
         out = dev.empty(4 * n)
-        dev.kernel(_PROGRAM, "KdQuery_occluded")(n, *self.kernel_args(), org, dirs, rng, out, np.int32(n))
+        dev.kernel(_PROGRAM, "KdQuery_occluded")(n, *self.kernel_args(), *rays, out, np.int32(n))
         return dev.read(out, n, np.int32).astype(bool)
 
     def _rays(self, origins, directions, t_min, t_max):
-        org = np.asarray(origins, np.float32).reshape(-1, 3)
-        dirs = np.asarray(directions, np.float32).reshape(-1, 3)
+        """The ray count and the query kernels' ray arguments: origins and
+        directions uploaded as packed float32 triples, the given t_min and
+        t_max per ray (None: the kernel's defaults, KdQuery_range), and the
+        constants of those defaults."""
+        org = np.ascontiguousarray(origins, np.float32).reshape(-1, 3)
+        dirs = np.ascontiguousarray(directions, np.float32).reshape(-1, 3)
         n = len(org)
-        org4, dir4 = float4_rows(org), float4_rows(dirs)
-        rng = np.zeros((max(n, 1), 2), np.float32)
-        if t_min is None:
-            # (column by column: much faster than reductions along short rows)
-            a = np.abs(org)
-            scale = np.maximum(np.maximum(a[:, 0], a[:, 1]), np.maximum(a[:, 2], self.magnitude))
-            d = dirs.astype(np.float64)
-            length = np.sqrt(np.einsum("ij,ij->i", d, d))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                rng[:n, 0] = np.where(length > 0, SELF_HIT_SCALE * scale / length, 0.0)
-        else:
-            rng[:n, 0] = np.broadcast_to(np.asarray(t_min, np.float32), (n,))
-        if t_max is None:
-            rng[:n, 1] = _FAR
-        else:
-            tmax = np.broadcast_to(np.asarray(t_max, np.float32), (n,)).copy()
-            tmax[~np.isfinite(tmax)] = _FAR
-            rng[:n, 1] = tmax
         dev = self.device
-        return n, dev.to_device(org4), dev.to_device(dir4), dev.to_device(rng)
+        lo = hi = None
+        if t_min is not None:
+            lo = dev.to_device(np.broadcast_to(np.asarray(t_min, np.float32), (max(n, 1),)).copy())
+        if t_max is not None:
+            tmax = np.broadcast_to(np.asarray(t_max, np.float32), (max(n, 1),)).copy()
+            tmax[~np.isfinite(tmax)] = _FAR
+            hi = dev.to_device(tmax)
+        rows = (dev.to_device(a if n else np.zeros((1, 3), np.float32)) for a in (org, dirs))
+        return n, (*rows, lo, hi, np.float32(SELF_HIT_SCALE), np.float32(self.magnitude), _FAR)
 
 
 def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool] | None = None,

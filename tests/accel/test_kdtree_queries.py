@@ -339,6 +339,41 @@ def test_t_max_limits_closest_hits(device):
     assert assert_closest_hits(tree, tris, org, dirs, t_max=0.7) > 100
 
 
+def test_a_given_t_min_skips_the_surfaces_before_it(device):
+    # two unit squares at z = 1 and z = 2 over rays going up from z = 0
+    square = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], np.float32)
+    tree = kdtree.build(device, np.concatenate([square + [0, 0, 1], square + [0, 0, 2]]))
+    rng = np.random.default_rng(30)
+    org = np.column_stack([rng.uniform(-0.9, 0.9, (500, 2)), np.zeros(500)]).astype(np.float32)
+    dirs = np.tile(np.float32([0, 0, 1]), (500, 1))
+    np.testing.assert_allclose(tree.intersect(org, dirs)[0], 1.0)
+    np.testing.assert_allclose(tree.intersect(org, dirs, t_min=1.5)[0], 2.0)  # one start for all
+    starts = np.where(np.arange(500) % 2 == 0, 0.5, 1.5).astype(np.float32)  # one start a ray
+    np.testing.assert_allclose(tree.intersect(org, dirs, t_min=starts)[0], np.where(starts < 1, 1.0, 2.0))
+    np.testing.assert_array_equal(tree.occluded(org, dirs, np.inf, t_min=2.5), False)
+    np.testing.assert_array_equal(tree.occluded(org, dirs, np.inf, t_min=starts), True)
+
+
+def test_the_default_t_min_is_the_coordinates_scale_over_the_direction_length(device):
+    # a ray from a surface point just past its own surface: the default start
+    # (SELF_HIT_SCALE x the coordinates' scale / |dir|) skips it, a start of 0 does not
+    tris = random_soup(300, seed=31)
+    tree = kdtree.build(device, tris)
+    rng = np.random.default_rng(32)
+    weights = rng.dirichlet([1, 1, 1], 300).astype(np.float32)
+    points = np.einsum("nk,nkj->nj", weights, tris)
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    dirs = (normals * rng.uniform(0.5, 4.0, (300, 1))).astype(np.float32)  # lengths differ
+    t_self = default_t_min(tree, points, dirs)
+    _, tri = tree.intersect(points, dirs, t_min=np.zeros(300, np.float32))
+    rows = np.arange(300)
+    own = tri == rows
+    assert own.sum() > 30  # a start of 0 finds some rays' own triangle right at their origin
+    t_default, tri_default = tree.intersect(points, dirs)
+    assert not (tri_default == rows).any()
+    np.testing.assert_array_equal(tree.intersect(points, dirs, t_min=t_self)[1], tri_default)
+
+
 # ---- watertightness ------------------------------------------------------------
 
 def test_rays_through_shared_edges_and_corners_never_slip_through(device):
