@@ -114,8 +114,9 @@ class KdTree:
             tmax = np.broadcast_to(np.asarray(t_max, np.float32), (max(n, 1),)).copy()
             tmax[~np.isfinite(tmax)] = _FAR
             hi = dev.to_device(tmax)
-        rows = (dev.to_device(a if n else np.zeros((1, 3), np.float32)) for a in (org, dirs))
-        return n, (*rows, lo, hi, np.float32(SELF_HIT_SCALE), np.float32(self.magnitude), _FAR)
+        empty = np.zeros((1, 3), np.float32)  # a zero-ray batch still passes buffers
+        org_dev, dirs_dev = (dev.to_device(a if n else empty) for a in (org, dirs))
+        return n, (org_dev, dirs_dev, lo, hi, np.float32(SELF_HIT_SCALE), np.float32(self.magnitude), _FAR)
 
 
 def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool] | None = None,

@@ -3,38 +3,30 @@
 #ifndef GPUGI_SORT_SMALL_H
 #define GPUGI_SORT_SMALL_H
 
+/* Value x of element e into the first i values of c, kept ascending with
+ * their elements in `order`, after any equal ones (an insertion sort's step). */
+inline void SortSmall_insert(float *c, int *order, int i, float x, int e) {
+    int k = i;
+    while (k > 0 && c[k - 1] > x) {
+        c[k] = c[k - 1];
+        order[k] = order[k - 1];
+        k--;
+    }
+    c[k] = x;
+    order[k] = e;
+}
+
 /* The n values v[4 i] (one coordinate of n float4) sorted into c,
  * ascending, with their element numbers in `order` (a stable insertion
  * sort: ties by element number). */
 inline void SortSmall_coordinate(const __global float *v, int n, float *c, int *order) {
-    for (int i = 0; i < n; ++i) {
-        float x = v[4 * i];
-        int k = i;
-        while (k > 0 && c[k - 1] > x) {
-            c[k] = c[k - 1];
-            order[k] = order[k - 1];
-            k--;
-        }
-        c[k] = x;
-        order[k] = i;
-    }
+    for (int i = 0; i < n; ++i) SortSmall_insert(c, order, i, v[4 * i], i);
 }
 
 /* The same for the n values v[4 seq[i]], inserted in the order of seq
  * (ties in that order): few moves where seq nearly sorts them already. */
 inline void SortSmall_coordinate_in(const __global float *v, int n, const int *seq, float *c, int *order) {
-    for (int i = 0; i < n; ++i) {
-        int e = seq[i];
-        float x = v[4 * e];
-        int k = i;
-        while (k > 0 && c[k - 1] > x) {
-            c[k] = c[k - 1];
-            order[k] = order[k - 1];
-            k--;
-        }
-        c[k] = x;
-        order[k] = e;
-    }
+    for (int i = 0; i < n; ++i) SortSmall_insert(c, order, i, v[4 * seq[i]], seq[i]);
 }
 
 #endif
