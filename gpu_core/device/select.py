@@ -151,12 +151,15 @@ _DEVICES: dict[str, Device] = {}
 _DEVICES_LOCK = threading.Lock()
 
 
-def free_held_memory() -> None:
-    """Give the unused pooled buffers of every device opened so far back to its driver."""
+def free_held_memory(keep_host_memory: bool = False) -> None:
+    """Give the unused pooled buffers of every device opened so far back to
+    its driver; with ``keep_host_memory``, those of CPU devices (host memory,
+    whose fresh pages cost their first touch) stay for the next render."""
     with _DEVICES_LOCK:
         devices = list(_DEVICES.values())
     for device in devices:
-        device.free_held()
+        if not (keep_host_memory and device.is_cpu):
+            device.free_held()
 
 
 def get_device(spec: str | None = None) -> Device:

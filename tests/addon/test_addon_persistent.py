@@ -83,6 +83,33 @@ def test_an_animation_keeps_its_renderer_across_frames_without_persistent_data(b
     assert {"kdtree", "global_photons"} <= set(plans[0])
     assert {"kdtree_reused", "global_photons_reused"} <= set(plans[1])  # only the camera moved
     assert final._JOB is None and not final._HELD  # the job's renderer is given back when it ends
-    pools = [device._pool for device in select._DEVICES.values() if device._pool is not None]
-    assert pools and all(pool.held_blocks == 0 for pool in pools)  # and the memory it let go
+    # and the memory it let go: a GPU's at once, a CPU device's (host memory) once the release comes
+    assert all(pool.held_blocks == 0 for pool, cpu in _pools() if not cpu)
+    final._release_if_idle(final._JOBS_STARTED)
+    assert _pools() and all(pool.held_blocks == 0 for pool, _ in _pools())
     assert sorted(os.listdir(tmp_path)) == ["frame_0001.exr", "frame_0002.exr"]
+
+
+def _pools() -> list:
+    """Each opened device's memory pool and whether the device is a CPU."""
+    return [(device._pool, device.is_cpu) for device in select._DEVICES.values() if device._pool is not None]
+
+
+def test_a_cpu_devices_memory_waits_for_the_next_render_and_goes_back_when_none_comes(bpy_module, tmp_path):
+    scene = _box_torus(bpy_module, False)
+    _frame(bpy_module, scene, tmp_path / "1.exr")
+    ended = final._JOBS_STARTED
+
+    def held(cpu: bool) -> int:
+        return sum(pool.held_blocks for pool, is_cpu in _pools() if is_cpu == cpu)
+
+    assert held(cpu=False) == 0  # a GPU's memory goes back when the job ends
+    assert held(cpu=True) > 0 or not any(is_cpu for _, is_cpu in _pools())  # a CPU's waits
+    first = held(cpu=True)
+    _frame(bpy_module, scene, tmp_path / "2.exr")
+    second = held(cpu=True)
+    assert second <= first + 16  # the next render took those buffers again: no growth
+    final._release_if_idle(ended)  # the first job's release: another job started since, it keeps them
+    assert held(cpu=True) == second
+    final._release_if_idle(final._JOBS_STARTED)  # the last job's release, nothing started since
+    assert held(cpu=True) == 0 and held(cpu=False) == 0
