@@ -40,9 +40,9 @@ _JOB: dict[str, object] | None = None
 # goes back to the driver (where Blender runs timers: in background mode the
 # process ends first); a GPU's goes back at once, as Cycles frees its
 # memory. A render into fresh buffers pays for the first touch of their
-# pages: F12 of the Cornell box at 256² Preview 570-577 -> 505-519 ms, of
-# the large scene 739-754 -> 646-652 ms with the pool kept (README, "Using
-# it": Animations).
+# pages: F12 of the Cornell box at 256² (default settings, no denoiser)
+# 570-577 -> 505-519 ms, of the large scene 739-754 -> 646-652 ms with the
+# pool kept (README, "Using it": Animations).
 RELEASE_AFTER_S = 30.0
 _JOBS_STARTED = 0  # render jobs so far: a pending release skips itself when another has started since
 
