@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from blender_addon.export import ExportError, export_scene
+from blender_addon.export.mesh import _times, _unit_rows
 from blender_addon.final import LAST_RUN
 from conftest import render_to_array
 from gpu_core.scene import (AREA_ELLIPSE, AREA_RECTANGLE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN,
@@ -464,6 +465,20 @@ def test_panoramic_camera_is_a_clear_export_error(bpy):
 def _face_normals(tris):
     n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def test_unit_rows_and_row_products_agree_with_numpys_row_by_row_forms():
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(200, 3, 3))
+    v[7, 1] = 0.0  # a zero vector stays zero
+    length = np.linalg.norm(v, axis=-1, keepdims=True)
+    with np.errstate(invalid="raise", divide="raise"):
+        unit = _unit_rows(v)
+    np.testing.assert_array_equal(unit, np.where(length > 0, v / np.where(length > 0, length, 1.0), 0.0))
+    assert not unit[7, 1].any()
+    matrix = rng.normal(size=(3, 3))
+    np.testing.assert_allclose(_times(v, matrix), v @ matrix, rtol=1e-13, atol=1e-15)
+    assert _times(v[0], matrix).shape == (3, 3)
 
 
 def test_non_uniform_and_mirroring_scales_keep_normals_on_the_winding_side(bpy):
