@@ -336,6 +336,19 @@ def test_a_released_buffer_is_handed_to_the_next_allocation_of_its_size(device):
     assert other.int_ptr != address
 
 
+def test_freeing_held_memory_can_keep_a_cpu_devices_host_memory(device):
+    # the tests' device was opened through get_device, so free_held_memory reaches it
+    from gpu_core.device import free_held_memory
+
+    dropped = device.empty(1 << 20)
+    del dropped
+    assert device._pool.held_blocks >= 1
+    free_held_memory(keep_host_memory=True)
+    assert (device._pool.held_blocks >= 1) == device.is_cpu  # a CPU's host memory waits, a GPU's goes
+    free_held_memory()
+    assert device._pool.held_blocks == 0
+
+
 def test_freeing_held_memory_gives_unused_buffers_back(device):
     kept = device.empty(1 << 20)
     dropped = device.empty(1 << 20)
