@@ -15,7 +15,8 @@ import numpy as np
 from gpu_core.errors import DeviceError, GpuGiError, RenderCancelled
 
 from .export import export_scene
-from .opencl_devices import free_unused_device_memory, survey
+from .device_memory import free_unused_device_memory, release_unused_later, render_started
+from .opencl_devices import survey
 from .passes import enabled_passes, wants_denoising_passes, wants_light_passes
 from .status import format_samples, format_stage_times, mode_line
 
@@ -35,16 +36,6 @@ _HELD_LOCK = threading.Lock()
 # whatever Persistent Data says: a fly-through traces its photons and builds
 # its kd-tree once while only the camera moves. None outside a job.
 _JOB: dict[str, object] | None = None
-# When a job ends, the memory its renderers let go on a CPU device (host
-# memory) stays in the device's pool for the next render this long, then
-# goes back to the driver (where Blender runs timers: in background mode the
-# process ends first); a GPU's goes back at once, as Cycles frees its
-# memory. A render into fresh buffers pays for the first touch of their
-# pages: F12 of the Cornell box at 256² (default settings, no denoiser)
-# 570-577 -> 505-519 ms, of the large scene 739-754 -> 646-652 ms with the
-# pool kept (README, "Using it": Animations).
-RELEASE_AFTER_S = 30.0
-_JOBS_STARTED = 0  # render jobs so far: a pending release skips itself when another has started since
 
 
 def render_final(engine, depsgraph) -> None:
@@ -133,33 +124,20 @@ def _fresh_renderer(device):
 
 def job_started(*_args) -> None:
     """Blender's render_init: frames from now on share their scene's renderer."""
-    global _JOB, _JOBS_STARTED
+    global _JOB
     with _HELD_LOCK:
         _JOB = {}
-        _JOBS_STARTED += 1
+    render_started()
 
 
 def job_ended(*_args) -> None:
     """Blender's render_complete or render_cancel: the job's renderers are
-    dropped; the device memory they let go goes back to the driver, on a
-    CPU device RELEASE_AFTER_S later unless another job has started by then."""
+    dropped, and the device memory they let go goes back to the drivers
+    (device_memory.py: a CPU device's once no render comes for a while)."""
     global _JOB
     with _HELD_LOCK:
         _JOB = None
-        started = _JOBS_STARTED
-    free_unused_device_memory(keep_host_memory=True)
-    import bpy
-
-    bpy.app.timers.register(lambda: _release_if_idle(started), first_interval=RELEASE_AFTER_S, persistent=True)
-
-
-def _release_if_idle(started: int) -> None:
-    """The release job_ended scheduled: only if no job has started since (a
-    timer's function; returning None runs it once)."""
-    with _HELD_LOCK:
-        idle = _JOB is None and _JOBS_STARTED == started
-    if idle:
-        free_unused_device_memory()
+    release_unused_later()
 
 
 def release_held() -> None:

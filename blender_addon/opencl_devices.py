@@ -38,13 +38,3 @@ def survey() -> Survey:
     if not devices:
         return Survey((), f"No OpenCL device found. {install_hint()}")
     return Survey(devices)
-
-
-def free_unused_device_memory(keep_host_memory: bool = False) -> None:
-    """Give the device memory no renderer holds back to the drivers (a
-    render job ended, a viewport closed; with ``keep_host_memory`` the CPU
-    devices' stays); nothing where no device was ever opened (gpu_core's
-    device layer not loaded, pyopencl perhaps missing)."""
-    devices = sys.modules.get("gpu_core.device")
-    if devices is not None:
-        devices.free_held_memory(keep_host_memory)

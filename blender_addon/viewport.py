@@ -32,7 +32,7 @@ from gpu_core.denoise import denoise
 from gpu_core.errors import GpuGiError, RenderCancelled
 
 from .export.camera import pixel_filter, view_camera
-from .opencl_devices import free_unused_device_memory
+from .device_memory import release_unused_later, render_started
 from .status import mode_line
 
 COARSE_FACTOR = 4
@@ -266,6 +266,7 @@ class ViewportSession:
             self._queued = (job, self._stop)
             self._closed = False
             self._wake.notify()
+        render_started()
         if self._thread is None or not self._thread.is_alive():
             # one worker for the session's life: OpenCL drivers keep per-thread
             # state, so a thread per edit would grow the process edit by edit
@@ -281,9 +282,10 @@ class ViewportSession:
         if self._thread is not None:
             self._thread.join(timeout=10.0)
         self._thread = None
-        # the view's renderers go, and their device memory back to the driver
+        # the view's renderers go, and their device memory back to the drivers
+        # (a CPU device's once no render comes for a while: device_memory.py)
         self._renderers = {}
-        free_unused_device_memory()
+        release_unused_later()
 
     def latest(self) -> tuple[np.ndarray | None, int]:
         """The newest finished image (float RGBA, rows from the bottom) and its version."""

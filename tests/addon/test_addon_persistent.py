@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, render_to_array
 
-from blender_addon import final
+from blender_addon import device_memory, final
 from blender_addon.final import LAST_RUN
 from gpu_core.device import select
 
@@ -85,7 +85,7 @@ def test_an_animation_keeps_its_renderer_across_frames_without_persistent_data(b
     assert final._JOB is None and not final._HELD  # the job's renderer is given back when it ends
     # and the memory it let go: a GPU's at once, a CPU device's (host memory) once the release comes
     assert all(pool.held_blocks == 0 for pool, cpu in _pools() if not cpu)
-    final._release_if_idle(final._JOBS_STARTED)
+    device_memory._release_if_idle(device_memory._RENDERS_STARTED)
     assert _pools() and all(pool.held_blocks == 0 for pool, _ in _pools())
     assert sorted(os.listdir(tmp_path)) == ["frame_0001.exr", "frame_0002.exr"]
 
@@ -98,7 +98,7 @@ def _pools() -> list:
 def test_a_cpu_devices_memory_waits_for_the_next_render_and_goes_back_when_none_comes(bpy_module, tmp_path):
     scene = _box_torus(bpy_module, False)
     _frame(bpy_module, scene, tmp_path / "1.exr")
-    ended = final._JOBS_STARTED
+    ended = device_memory._RENDERS_STARTED
 
     def held(cpu: bool) -> int:
         return sum(pool.held_blocks for pool, is_cpu in _pools() if is_cpu == cpu)
@@ -109,7 +109,7 @@ def test_a_cpu_devices_memory_waits_for_the_next_render_and_goes_back_when_none_
     _frame(bpy_module, scene, tmp_path / "2.exr")
     second = held(cpu=True)
     assert second <= first + 16  # the next render took those buffers again: no growth
-    final._release_if_idle(ended)  # the first job's release: another job started since, it keeps them
+    device_memory._release_if_idle(ended)  # the first job's release: another job started since, it keeps them
     assert held(cpu=True) == second
-    final._release_if_idle(final._JOBS_STARTED)  # the last job's release, nothing started since
+    device_memory._release_if_idle(device_memory._RENDERS_STARTED)  # the last job's release, nothing started since
     assert held(cpu=True) == 0 and held(cpu=False) == 0
