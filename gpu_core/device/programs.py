@@ -32,6 +32,7 @@ from ..errors import DeviceError
 from . import constants, layout
 from ..shading import microfacet_tables
 
+POCL_PLATFORM = "Portable Computing Language"  # PoCL's platform name, which several quirks below are keyed by
 INCLUDE_ROOT = Path(__file__).resolve().parent.parent
 _INCLUDE_RE = re.compile(r'^[ \t]*#[ \t]*include[ \t]+"([^"]+)"[ \t]*$', re.MULTILINE)
 _KERNEL_RE = re.compile(r"\b__kernel\b")
@@ -70,11 +71,11 @@ _SIMULATOR_MARK = "-DGPUGI_SIMULATOR=1"
 # keys a compiled object and a built program of one source alike, so the
 # compiled ones carry a define of their own: a full build of the same source
 # elsewhere would otherwise hand compile() a linked program to link again.
-_SEPARATE_PLATFORMS = ("Portable Computing Language",)
+_SEPARATE_PLATFORMS = (POCL_PLATFORM,)
 _SEPARATE_MARK = "-DGPUGI_COMPILED_OBJECT=1"
 # PoCL links its builtins after inlining, leaving each dot or fmax a call:
 # there every program starts with the header that inlines them
-_INLINE_BUILTINS_PLATFORMS = ("Portable Computing Language",)
+_INLINE_BUILTINS_PLATFORMS = (POCL_PLATFORM,)
 _INLINE_BUILTINS = Path(__file__).with_name("pocl_builtins.h")
 # Division and square root correctly rounded wherever the device offers it
 # (OpenCL C allows 2.5 and 3 ulp otherwise, and NVIDIA's driver takes that):
@@ -86,7 +87,7 @@ _EXACT_DIVISION = "-cl-fp32-correctly-rounded-divide-sqrt"
 # Native cosine and sine only where they are accurate to a few ulp (PoCL):
 # elsewhere sampling.h takes the accurate pair (Intel's CPU runtime's
 # natives err by 1.5e-4, enough to lose a photon path: tests/device/test_sampling.py)
-_NATIVE_TRIG_PLATFORMS = ("Portable Computing Language",)
+_NATIVE_TRIG_PLATFORMS = (POCL_PLATFORM,)
 _NATIVE_TRIG_MARK = "-DGPUGI_NATIVE_TRIG=1"
 # PoCL 3.0's LLVM 14 names a CPU newer than it "generic" and refuses to compile for it
 _UNKNOWN_CPU_HINT = ("\nThis OpenCL compiler does not know this CPU model. Choose another OpenCL device: "
@@ -101,8 +102,7 @@ _UNKNOWN_CPU_HINT = ("\nThis OpenCL compiler does not know this CPU model. Choos
 # in threads too: a render's 9 programs 15.8 s one after another, 12.4-14.2
 # s in threads on an H100; but helper processes there took 27-35 s against
 # 16-22 s in threads, so it keeps to threads.)
-_SERIAL_COMPILER_PLATFORMS = ("Portable Computing Language",)
-
+_SERIAL_COMPILER_PLATFORMS = (POCL_PLATFORM,)
 _MAX_HELPERS = 3
 _HELPER_WAIT = 300.0
 # A program's build cost, to share builds out evenly, in source characters:

@@ -23,7 +23,7 @@ import pyopencl as cl
 from ..errors import DeviceError
 from . import pip_drivers
 from .device import Device
-from .programs import kernel_cache_dir
+from .programs import POCL_PLATFORM, kernel_cache_dir
 
 
 def load_pip_drivers() -> None:
@@ -94,10 +94,6 @@ def list_devices() -> list[str]:
 
 # OpenCL platforms that check kernels rather than run them fast: never chosen automatically
 SIMULATORS = ("oclgrind",)
-
-
-# PoCL's platform, named as programs.py names it for its build quirks
-POCL_PLATFORM = "Portable Computing Language"
 
 
 def is_pocl(dev: cl.Device) -> bool:
