@@ -18,8 +18,9 @@
  * cut threshold), KD_COST_TRAVERSE (SAH cost of a node step, in triangle
  * tests), KD_BAD_SPLITS (median splits in a row without progress allowed
  * before a large node becomes a leaf), KD_SAH_GROUP (work-group size of the SAH
- * search) and KD_SAH_LANES (its work-items per node, a power of two
- * dividing KD_SAH_GROUP). */
+ * search), KD_SAH_LANES (its work-items per node, a power of two
+ * dividing KD_SAH_GROUP) and KD_MAX_CHAIN (empty-space cuts a large node
+ * makes in one level before its split: one a face of its cell). */
 #include "device/launch.h"
 #include "device/structs.h"
 #include "accel/kdtree_clip.h"
@@ -188,29 +189,12 @@ __kernel void KdBuild_chunk_bounds(const __global int4 *act_info,
 #endif
 }
 
-/* Per node: its bounds from its chunks (segmented reduction, the chunks of
- * a node being contiguous), clipped to its cell; then the plane. A side
- * with more than KD_EMPTY_RATIO of the cell empty is cut off first;
- * otherwise the longest axis of the bounds is split at its middle. */
-inline void KdBuild_large_split_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
-                                   const __global int4 *act_info, const __global int *chunk_base,
-                                   const __global float4 *chunk_lo, const __global float4 *chunk_hi,
-                                   __global float *node_split, __global int *node_mode) {
-    int first = chunk_base[i];
-    int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
-    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
-    for (int k = 0; k < chunks; ++k) {
-        lo = fmin(lo, chunk_lo[first + k]);
-        hi = fmax(hi, chunk_hi[first + k]);
-    }
-    float4 cell_lo = act_lo[i], cell_hi = act_hi[i];
-    lo = fmax(lo, cell_lo);
-    hi = fmin(hi, cell_hi);
-
-    /* empty-space cut: the emptiest side beyond the threshold */
+/* The empty-space cut of a cell [cell_lo, cell_hi] whose elements lie in
+ * [lo, hi] (within it): the side with the largest empty fraction beyond
+ * KD_EMPTY_RATIO; KD_SPLIT_NONE where none is. */
+inline int KdBuild_empty_cut(float4 lo, float4 hi, float4 cell_lo, float4 cell_hi, int *axis, float *plane) {
     float best = KD_EMPTY_RATIO;
-    int kind = KD_SPLIT_NONE, axis = 0;
-    float plane = 0.0f;
+    int kind = KD_SPLIT_NONE;
     for (int a = 0; a < 3; ++a) {
         float extent = Axis_of(cell_hi, a) - Axis_of(cell_lo, a);
         if (!(extent > 0.0f)) continue;
@@ -219,32 +203,96 @@ inline void KdBuild_large_split_at(int i, const __global float4 *act_lo, const _
         if (below > best) {
             best = below;
             kind = KD_CUT_LOW;
-            axis = a;
-            plane = Axis_of(lo, a);
+            *axis = a;
+            *plane = Axis_of(lo, a);
         }
         if (above > best) {
             best = above;
             kind = KD_CUT_HIGH;
-            axis = a;
-            plane = Axis_of(hi, a);
+            *axis = a;
+            *plane = Axis_of(hi, a);
         }
     }
-    /* spatial median of the longest axis whose middle lies strictly inside */
-    if (kind == KD_SPLIT_NONE) {
-        float longest = 0.0f;
-        for (int a = 0; a < 3; ++a) {
-            float l = Axis_of(lo, a), h = Axis_of(hi, a);
-            float mid = 0.5f * l + 0.5f * h;
-            if (h - l > longest && l < mid && mid < h) {
-                longest = h - l;
-                kind = KD_SPLIT_MEDIAN;
-                axis = a;
-                plane = mid;
+    return kind;
+}
+
+/* The cell of what a cut (mode, plane) keeps of [*lo, *hi]. */
+inline void KdBuild_cut_cell(int mode, float plane, float4 *lo, float4 *hi) {
+    if ((mode >> 2) == KD_CUT_LOW) *lo = Axis_with(*lo, mode & 3, plane);
+    else *hi = Axis_with(*hi, mode & 3, plane);
+}
+
+/* Per node: its bounds from its chunks (segmented reduction, the chunks of
+ * a node being contiguous), clipped to its cell; then the plane. A side
+ * with more than KD_EMPTY_RATIO of the cell empty is cut off first;
+ * otherwise the longest axis of the bounds is split at its middle.
+ * Every element lies on the side a cut keeps, unchanged, so that side is
+ * the same node with a smaller cell and one level deeper: where `chain`
+ * allows and the depth limit leaves it a large node, the cut is kept in
+ * the node's chain (chain_cut, node_chain[i] of them) and the decision
+ * made again for the kept cell, in this level instead of the next (the
+ * same tree, the node's elements passed over once); the last decision is
+ * the node's plane and mode. `chain` is 0 where the level's children
+ * could spend the element budget (whose leaves would then differ). */
+inline void KdBuild_large_split_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
+                                   const __global int4 *act_info, const __global int *chunk_base,
+                                   const __global float4 *chunk_lo, const __global float4 *chunk_hi, int max_depth,
+                                   int chain, __global float *node_split, __global int *node_mode,
+                                   __global int *node_chain, __global int2 *chain_cut) {
+    int first = chunk_base[i];
+    int chunks = (act_info[i].y + KD_CHUNK - 1) / KD_CHUNK;
+    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+    for (int k = 0; k < chunks; ++k) {
+        lo = fmin(lo, chunk_lo[first + k]);
+        hi = fmax(hi, chunk_hi[first + k]);
+    }
+    float4 cell_lo = act_lo[i], cell_hi = act_hi[i];
+    int depth = KdBuild_depth(act_info[i]), chained = 0, kind, axis = 0;
+    float plane = 0.0f;
+    while (true) {
+        float4 blo = fmax(lo, cell_lo), bhi = fmin(hi, cell_hi);
+        /* empty-space cut: the emptiest side beyond the threshold */
+        kind = KdBuild_empty_cut(blo, bhi, cell_lo, cell_hi, &axis, &plane);
+        /* spatial median of the longest axis whose middle lies strictly inside */
+        if (kind == KD_SPLIT_NONE) {
+            float longest = 0.0f;
+            for (int a = 0; a < 3; ++a) {
+                float l = Axis_of(blo, a), h = Axis_of(bhi, a);
+                float mid = 0.5f * l + 0.5f * h;
+                if (h - l > longest && l < mid && mid < h) {
+                    longest = h - l;
+                    kind = KD_SPLIT_MEDIAN;
+                    axis = a;
+                    plane = mid;
+                }
             }
+            break;
         }
+        if (!chain || chained == KD_MAX_CHAIN || depth + chained + 1 >= max_depth) break;
+        chain_cut[KD_MAX_CHAIN * i + chained] = (int2)(axis | (kind << 2), as_int(plane));
+        KdBuild_cut_cell(axis | (kind << 2), plane, &cell_lo, &cell_hi);
+        chained++;
     }
+    node_chain[i] = chained;
     node_split[i] = plane;
     node_mode[i] = axis | (kind << 2);
+}
+
+/* Node i's cell and info at the end of its chain of cuts (depth past
+ * them); returns the chain's length. */
+inline int KdBuild_chain_end(int i, const __global float4 *act_lo, const __global float4 *act_hi,
+                             const __global int4 *act_info, const __global int *node_chain,
+                             const __global int2 *chain_cut, float4 *lo, float4 *hi, int4 *info) {
+    *lo = act_lo[i];
+    *hi = act_hi[i];
+    *info = act_info[i];
+    int n = node_chain[i];
+    for (int j = 0; j < n; ++j) {
+        int2 cut = chain_cut[KD_MAX_CHAIN * i + j];
+        KdBuild_cut_cell(cut.x, as_float(cut.y), lo, hi);
+    }
+    info->w += n; /* the depth, in the low bits */
+    return n;
 }
 
 __kernel void KdBuild_large_split(const __global float4 *act_lo,
@@ -253,11 +301,15 @@ __kernel void KdBuild_large_split(const __global float4 *act_lo,
                                   const __global int *chunk_base,
                                   const __global float4 *chunk_lo,
                                   const __global float4 *chunk_hi, const int n,
+                                  const int max_depth, const int chain,
                                   __global float *node_split,
-                                  __global int *node_mode) {
+                                  __global int *node_mode,
+                                  __global int *node_chain,
+                                  __global int2 *chain_cut) {
     int i = Launch_global_id();
     if (i < n)
-        KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, node_split, node_mode);
+        KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, max_depth, chain,
+                               node_split, node_mode, node_chain, chain_cut);
 }
 
 /* Per element: the sides of its node's plane it goes to (packed as
@@ -340,10 +392,9 @@ inline bool KdBuild_large_leaf(int4 info, int bad, int max_depth, int force_leaf
     return KdBuild_depth(info) + 1 >= max_depth || force_leaf || bad > KD_BAD_SPLITS;
 }
 
-/* Whether a median split of node i pays (see KdBuild_pays); cuts always do. */
-inline bool KdBuild_split_pays(const __global float4 *act_lo, const __global float4 *act_hi, int i, int mode,
-                               float plane, int2 counts, int total) {
-    return (mode >> 2) != KD_SPLIT_MEDIAN || KdBuild_pays(act_lo[i], act_hi[i], mode & 3, plane, counts, total);
+/* Whether a median split of cell [lo, hi] pays (see KdBuild_pays); cuts always do. */
+inline bool KdBuild_split_pays(float4 lo, float4 hi, int mode, float plane, int2 counts, int total) {
+    return (mode >> 2) != KD_SPLIT_MEDIAN || KdBuild_pays(lo, hi, mode & 3, plane, counts, total);
 }
 
 /* Per node: the element counts of its two children (from the scan of the
@@ -351,24 +402,29 @@ inline bool KdBuild_split_pays(const __global float4 *act_lo, const __global flo
  * level's counters: (large elements, small elements, leaf elements, large
  * nodes, small roots, new records, 0, 0). A child is an empty leaf when it
  * has no element, a small root with at most KD_SMALL, a leaf by
- * KdBuild_large_leaf, else a large node. */
+ * KdBuild_large_leaf, else a large node. The node is taken at the end of
+ * its chain of cuts, each of which adds two records. */
 inline void KdBuild_large_children_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
                                       const __global int4 *act_info, const __global float *node_split,
-                                      const __global int *node_mode, const __global long *flag_scan,
+                                      const __global int *node_mode, const __global int *node_chain,
+                                      const __global int2 *chain_cut, const __global long *flag_scan,
                                       const __global long *flag_total, int n_el, int max_depth, int force_leaf,
                                       __global int2 *node_counts, __global int8 *counters) {
-    int4 info = act_info[i];
+    float4 cell_lo, cell_hi;
+    int4 info;
+    int chained = KdBuild_chain_end(i, act_lo, act_hi, act_info, node_chain, chain_cut, &cell_lo, &cell_hi, &info);
     int end = info.x + info.y;
     long sum = (end < n_el ? flag_scan[end] : flag_total[0]) - flag_scan[info.x];
     int2 counts = (int2)((int)(sum & 0xffffffffL), (int)(sum >> 32));
     node_counts[i] = counts;
     int8 c = (int8)(0);
+    c.s5 = 2 * chained;
     int mode = node_mode[i];
     if ((mode >> 2) == KD_SPLIT_NONE) {
         c.s2 = counts.x;
     } else {
-        bool pays = KdBuild_split_pays(act_lo, act_hi, i, mode, node_split[i], counts, info.y);
-        c.s5 = 2;
+        bool pays = KdBuild_split_pays(cell_lo, cell_hi, mode, node_split[i], counts, info.y);
+        c.s5 += 2;
         for (int side = 0; side < 2; ++side) {
             int count = side == 0 ? counts.x : counts.y;
             if (count == 0) continue;
@@ -391,6 +447,8 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
                                      const __global int4 *act_info,
                                      const __global float *node_split,
                                      const __global int *node_mode,
+                                     const __global int *node_chain,
+                                     const __global int2 *chain_cut,
                                      const __global long *flag_scan,
                                      const __global long *flag_total,
                                      const int n_el, const int n,
@@ -399,27 +457,49 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
                                      __global int8 *counters) {
     int i = Launch_global_id();
     if (i < n)
-        KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, flag_scan, flag_total, n_el,
-                                  max_depth, force_leaf, node_counts, counters);
+        KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut, flag_scan,
+                                  flag_total, n_el, max_depth, force_leaf, node_counts, counters);
 }
 
-/* Per node: writes its record, its children's records, cells and depth,
- * the next level's large nodes and the new small roots, and where each
- * child's elements go (dest: kind below, base below, kind above, base
+/* Per node: writes the records of its chain of cuts (each an inner node
+ * with an empty leaf and the kept part, which the next cut or the last
+ * decision divides), its own record, its children's records, cells and
+ * depth, the next level's large nodes and the new small roots, and where
+ * each child's elements go (dest: kind below, base below, kind above, base
  * above). Bases are the exclusive scan of the counters plus the level's
  * offsets into the growing arrays. */
 inline void KdBuild_large_emit_at(
     int i, const __global float4 *act_lo, const __global float4 *act_hi, const __global int4 *act_info,
-    const __global float *node_split, const __global int *node_mode, const __global int2 *node_counts,
+    const __global float *node_split, const __global int *node_mode, const __global int *node_chain,
+    const __global int2 *chain_cut, const __global int2 *node_counts,
     const __global int8 *counter_scan, int max_depth, int force_leaf, int rec_base, int root_base, int small_el_base,
     int leaf_base, __global float4 *rec_lo, __global float4 *rec_hi, __global int4 *rec_info, __global float *rec_split,
     __global float4 *next_lo, __global float4 *next_hi, __global int4 *next_info, __global int4 *small_roots,
     __global int4 *node_dest) {
     int4 info = act_info[i];
     int8 base = counter_scan[i];
+    float4 cell_lo = act_lo[i], cell_hi = act_hi[i];
+    int depth = KdBuild_depth(info);
+    for (int j = 0; j < node_chain[i]; ++j, ++depth) {
+        int2 cut = chain_cut[KD_MAX_CHAIN * i + j];
+        int left = rec_base + base.s5, kept = (cut.x >> 2) == KD_CUT_LOW ? 1 : 0;
+        base.s5 += 2;
+        rec_info[info.z] = (int4)(cut.x & 3, left, left + 1, depth);
+        rec_split[info.z] = as_float(cut.y);
+        for (int side = 0; side < 2; ++side) {
+            float4 lo = cell_lo, hi = cell_hi;
+            if (side == 0) hi = Axis_with(hi, cut.x & 3, as_float(cut.y));
+            else lo = Axis_with(lo, cut.x & 3, as_float(cut.y));
+            rec_lo[left + side] = lo;
+            rec_hi[left + side] = hi;
+            rec_info[left + side] = (int4)(KD_LEAF, 0, 0, depth + 1);
+        }
+        KdBuild_cut_cell(cut.x, as_float(cut.y), &cell_lo, &cell_hi);
+        info.z = left + kept;
+    }
+    info.w = depth | (KdBuild_bad(info) << 16);
     int mode = node_mode[i];
     int axis = mode & 3;
-    int depth = KdBuild_depth(info);
     if ((mode >> 2) == KD_SPLIT_NONE) {
         rec_info[info.z] = (int4)(KD_LEAF, leaf_base + base.s2, info.y, depth);
         node_dest[i] = (int4)(KD_DEST_LEAF, leaf_base + base.s2, KD_DEST_NONE, 0);
@@ -427,7 +507,7 @@ inline void KdBuild_large_emit_at(
     }
     float plane = node_split[i];
     int2 counts = node_counts[i];
-    bool pays = KdBuild_split_pays(act_lo, act_hi, i, mode, plane, counts, info.y);
+    bool pays = KdBuild_split_pays(cell_lo, cell_hi, mode, plane, counts, info.y);
     int left = rec_base + base.s5;
     rec_info[info.z] = (int4)(axis, left, left + 1, depth);
     rec_split[info.z] = plane;
@@ -435,7 +515,7 @@ inline void KdBuild_large_emit_at(
     for (int side = 0; side < 2; ++side) {
         int child = left + side;
         int count = side == 0 ? counts.x : counts.y;
-        float4 lo = act_lo[i], hi = act_hi[i];
+        float4 lo = cell_lo, hi = cell_hi;
         if (side == 0) hi = Axis_with(hi, axis, plane);
         else lo = Axis_with(lo, axis, plane);
         rec_lo[child] = lo;
@@ -474,7 +554,8 @@ inline void KdBuild_large_emit_at(
 __kernel void KdBuild_large_emit(
     const __global float4 *act_lo, const __global float4 *act_hi,
     const __global int4 *act_info, const __global float *node_split,
-    const __global int *node_mode, const __global int2 *node_counts,
+    const __global int *node_mode, const __global int *node_chain,
+    const __global int2 *chain_cut, const __global int2 *node_counts,
     const __global int8 *counter_scan, const int n, const int max_depth,
     const int force_leaf, const int rec_base, const int root_base,
     const int small_el_base, const int leaf_base, __global float4 *rec_lo,
@@ -484,9 +565,9 @@ __kernel void KdBuild_large_emit(
     __global int4 *node_dest) {
     int i = Launch_global_id();
     if (i < n)
-        KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_counts, counter_scan, max_depth,
-                              force_leaf, rec_base, root_base, small_el_base, leaf_base, rec_lo, rec_hi, rec_info,
-                              rec_split, next_lo, next_hi, next_info, small_roots, node_dest);
+        KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut, node_counts,
+                              counter_scan, max_depth, force_leaf, rec_base, root_base, small_el_base, leaf_base, rec_lo,
+                              rec_hi, rec_info, rec_split, next_lo, next_hi, next_info, small_roots, node_dest);
 }
 
 /* Per element: copies it to each side it goes to, at its rank among its
@@ -883,36 +964,75 @@ __kernel void KdBuild_small_emit(
 
 /* ---- output stage ------------------------------------------------------- */
 
-/* Subtree sizes of records [begin, end), whose children (made later) are
- * already sized. */
-inline void KdBuild_subtree_size_at(int p, const __global int4 *rec_info, __global int *size) {
-    int4 info = rec_info[p];
-    size[p] = info.x == KD_LEAF ? 1 : 1 + size[info.y] + size[info.z];
+/* Whether record r is in the batch [begin, end). */
+inline bool KdBuild_in(int r, int begin, int end) { return r >= begin && r < end; }
+
+/* Whether inner record r's children were made in the batch [begin, end):
+ * a node's chain of cuts (KdBuild_large_split_at) makes a level's records
+ * one below another; any other record's children come in a later batch. */
+inline bool KdBuild_chained(int4 info, int begin, int end) {
+    return info.x != KD_LEAF && KdBuild_in(info.y, begin, end);
+}
+
+/* Subtree size of record p of the batch [begin, end), whose children made
+ * in later batches are already sized: down a chain of cuts inside the
+ * batch (one child of each cut its empty leaf, the other the kept part)
+ * record by record. */
+inline void KdBuild_subtree_size_at(int p, const __global int4 *rec_info, __global int *size, int begin, int end) {
+    int total = 0;
+    for (int q = p; q >= 0;) {
+        int4 info = rec_info[q];
+        total += 1;
+        if (info.x == KD_LEAF) break;
+        int next = -1;
+        for (int side = 0; side < 2; ++side) {
+            int c = side == 0 ? info.y : info.z;
+            int4 child = rec_info[c];
+            if (!KdBuild_in(c, begin, end)) total += size[c];
+            else if (KdBuild_chained(child, begin, end)) next = c;
+            else total += child.x == KD_LEAF ? 1 : 1 + size[child.y] + size[child.z];
+        }
+        q = next;
+    }
+    size[p] = total;
 }
 
 __kernel void KdBuild_subtree_size(const __global int4 *rec_info,
                                    const int begin, const int end,
                                    __global int *size) {
     int p = begin + Launch_global_id();
-    if (p < end) KdBuild_subtree_size_at(p, rec_info, size);
+    if (p < end) KdBuild_subtree_size_at(p, rec_info, size, begin, end);
 }
 
-/* Preorder addresses of the children of records [begin, end), whose own
- * addresses are known: the left child follows its parent, the right
- * child follows the left subtree. */
+/* Preorder addresses of the children of record p of a batch, whose own
+ * address is known: the left child follows its parent, the right child
+ * follows the left subtree; and down a chain of cuts made in the next
+ * batch [next_begin, next_end), the addresses of every record in it (its
+ * records there, whose parents are in that batch too, are skipped when
+ * that batch comes). */
 inline void KdBuild_preorder_at(int p, const __global int4 *rec_info, const __global int *size,
-                                __global int *addr) {
+                                __global int *addr, int begin, int end, int next_begin, int next_end) {
     int4 info = rec_info[p];
-    if (info.x == KD_LEAF) return;
-    addr[info.y] = addr[p] + 1;
-    addr[info.z] = addr[p] + 1 + size[info.y];
+    if (info.x == KD_LEAF || KdBuild_chained(info, begin, end)) return;
+    for (int q = p; q >= 0;) {
+        addr[info.y] = addr[q] + 1;
+        addr[info.z] = addr[q] + 1 + size[info.y];
+        int next = -1;
+        for (int side = 0; side < 2; ++side) {
+            int c = side == 0 ? info.y : info.z;
+            if (KdBuild_in(c, next_begin, next_end) && KdBuild_chained(rec_info[c], next_begin, next_end)) next = c;
+        }
+        q = next;
+        if (q >= 0) info = rec_info[q];
+    }
 }
 
 __kernel void KdBuild_preorder(const __global int4 *rec_info,
                                const __global int *size, const int begin,
-                               const int end, __global int *addr) {
+                               const int end, const int next_begin,
+                               const int next_end, __global int *addr) {
     int p = begin + Launch_global_id();
-    if (p < end) KdBuild_preorder_at(p, rec_info, size, addr);
+    if (p < end) KdBuild_preorder_at(p, rec_info, size, addr, begin, end, next_begin, next_end);
 }
 
 /* Every record to its preorder KdNode. */
@@ -996,7 +1116,7 @@ __kernel void KdBuild_serial(
     __global float4 *below_hi, __global float4 *above_lo, __global float4 *above_hi, __global float4 *act_lo,
     __global float4 *act_hi, __global int4 *act_info, __global float4 *nact_lo, __global float4 *nact_hi,
     __global int4 *nact_info, __global int *chunk_base, __global float *node_split, __global int *node_mode,
-    __global int2 *node_counts, __global int8 *counters, __global int8 *counter_scan, __global int4 *node_dest,
+    __global int *node_chain, __global int2 *chain_cut, __global int2 *node_counts, __global int8 *counters, __global int8 *counter_scan, __global int4 *node_dest,
     __global int *chunk_node, __global float4 *chunk_lo, __global float4 *chunk_hi, __global int4 *small_roots,
     __global int *sel_tri, __global float4 *sel_lo, __global float4 *sel_hi, __global int *sel_root,
     __global ulong2 *cand, __global int2 *sn_node, __global ulong *sn_mask, __global int2 *nsn_node,
@@ -1036,8 +1156,10 @@ __kernel void KdBuild_serial(
             chunk_lo[c] = lo;
             chunk_hi[c] = hi;
         }
+        int chain = 2 * elements <= budget; /* no child of this level can spend the budget */
         for (int i = 0; i < active; ++i)
-            KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, node_split, node_mode);
+            KdBuild_large_split_at(i, act_lo, act_hi, act_info, chunk_base, chunk_lo, chunk_hi, max_depth, chain,
+                                   node_split, node_mode, node_chain, chain_cut);
         for (int e = 0; e < elements; ++e)
             KdBuild_large_classify_at(e, verts, el_tri, el_lo, el_hi, el_node, node_split, node_mode, eps, flags,
                                       below_lo, below_hi, above_lo, above_hi);
@@ -1052,8 +1174,9 @@ __kernel void KdBuild_serial(
         int force_leaf = 0;
         for (; force_leaf < 2; ++force_leaf) {
             for (int i = 0; i < active; ++i)
-                KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, flag_scan, flag_total,
-                                          elements, max_depth, force_leaf, node_counts, counters);
+                KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut,
+                                          flag_scan, flag_total, elements, max_depth, force_leaf, node_counts,
+                                          counters);
             total = (int8)(0);
             for (int i = 0; i < active; ++i) {
                 counter_scan[i] = total;
@@ -1067,8 +1190,8 @@ __kernel void KdBuild_serial(
             n_batches == caps.s7)
             return;
         for (int i = 0; i < active; ++i)
-            KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_counts, counter_scan,
-                                  max_depth, force_leaf, rec_count, root_count, small_count, leaf_count, rec_lo,
+            KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut,
+                                  node_counts, counter_scan, max_depth, force_leaf, rec_count, root_count, small_count, leaf_count, rec_lo,
                                   rec_hi, rec_info, rec_split, nact_lo, nact_hi, nact_info, small_roots, node_dest);
         for (int e = 0; e < elements; ++e)
             KdBuild_large_scatter_at(e, el_tri, el_node, act_info, flags, flag_scan, below_lo, below_hi, above_lo,
@@ -1133,10 +1256,14 @@ __kernel void KdBuild_serial(
     }
     /* output stage (_Build.output_stage) */
     for (int b = n_batches - 1; b >= 0; --b)
-        for (int p = batches[b].x; p < batches[b].y; ++p) KdBuild_subtree_size_at(p, rec_info, size);
+        for (int p = batches[b].x; p < batches[b].y; ++p)
+            KdBuild_subtree_size_at(p, rec_info, size, batches[b].x, batches[b].y);
     addr[0] = 0;
-    for (int b = 0; b < n_batches; ++b)
-        for (int p = batches[b].x; p < batches[b].y; ++p) KdBuild_preorder_at(p, rec_info, size, addr);
+    for (int b = 0; b < n_batches; ++b) {
+        int2 next = b + 1 < n_batches ? batches[b + 1] : (int2)(rec_count, rec_count);
+        for (int p = batches[b].x; p < batches[b].y; ++p)
+            KdBuild_preorder_at(p, rec_info, size, addr, batches[b].x, batches[b].y, next.x, next.y);
+    }
     for (int p = 0; p < rec_count; ++p) KdBuild_output_at(p, rec_info, rec_split, addr, nodes);
     result[0] = 0;
     result[1] = rec_count;

@@ -5,7 +5,8 @@ the next level's counts (one scan total a level; the chunk kernel runs over
 a bound and reads its own count on the device):
 
 * large-node stage: chunk bounds (a work-item per chunk on a CPU, a
-  work-group per chunk elsewhere), node bounds, empty-space cut or spatial
+  work-group per chunk elsewhere), node bounds, empty-space cuts (up to
+  ``MAX_CHAIN`` a node in one level: a cut moves no triangle) then a spatial
   median split, triangles clipped to the children, counts and compaction
   by prefix sums; children with at most ``SMALL`` triangles become small
   roots; a larger child becomes a leaf after more than ``BAD_SPLITS``
@@ -48,6 +49,7 @@ from . import kdtree_blocks
 CHUNK = 256  # elements per chunk of the large-node stage
 SMALL = 64  # largest small node (the width of its element mask)
 EMPTY_RATIO = 0.25  # empty fraction of a side that is cut off
+MAX_CHAIN = 6  # empty-space cuts a large node makes in one level before its split (one a face of its cell)
 COST_TRAVERSE = 1.0  # SAH cost of a node step, in triangle tests, where leaves test triangles one by one
 # the same where leaves test them four at a time from blocks (kdtree_blocks.py): a CPU traced fastest at 8-10
 # (bench/kdtree.py: larger leaves, a quarter of the nodes; one by one, 1 was fastest)
@@ -116,7 +118,7 @@ class _Config:
             "KD_CHUNK": CHUNK, "KD_SMALL": SMALL, "KD_EMPTY_RATIO": f"{EMPTY_RATIO!r}f",
             "KD_COST_TRAVERSE": f"{self.cost_traverse!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
             "KD_SAH_LANES": self.sah_lanes, "KD_CHUNK_LANES": self.chunk_lanes,
-            "KD_SORTED_MASKS": int(self.sorted_masks),
+            "KD_SORTED_MASKS": int(self.sorted_masks), "KD_MAX_CHAIN": MAX_CHAIN,
         }
 
 
@@ -161,7 +163,9 @@ class _Build:
         self.rec_lo, self.rec_hi = _Growing(device, cltypes.float4, n), _Growing(device, cltypes.float4, n)
         self.rec_info, self.rec_split = _Growing(device, cltypes.int4, n), _Growing(device, np.float32, n)
         self.rec_count = 1
-        self.batches = [(0, 1)]  # record ranges in creation order; children come after parents
+        # record ranges in creation order; children come after parents, in a
+        # later range but down a node's chain of cuts (inside one)
+        self.batches = [(0, 1)]
         self.leaf_tris, self.leaf_count = _Growing(device, np.int32, n), 0
         self.small_roots = _Growing(device, cltypes.int4, count // 16 + 1)
         self.sel_tri, self.sel_lo, self.sel_hi = (_Growing(device, t, n) for t in (np.int32, cltypes.float4, cltypes.float4))
@@ -225,7 +229,8 @@ class _Build:
             self.rec_lo, self.rec_hi, self.rec_info, self.rec_split, *elements,
             *(dev.array(el_cap, t) for t in (np.int32, f4, f4, np.int32, np.int64, np.int64)), dev.array(1, np.int64),
             *(dev.array(el_cap, f4) for _ in range(4)), *active, *(dev.array(act_cap, t) for t in (f4, f4, i4)),
-            *(dev.array(act_cap, t) for t in (np.int32, np.float32, np.int32, cltypes.int2, i8, i8, i4)),
+            *(dev.array(act_cap, t) for t in (np.int32, np.float32, np.int32, np.int32)),
+            dev.array(MAX_CHAIN * act_cap, cltypes.int2), *(dev.array(act_cap, t) for t in (cltypes.int2, i8, i8, i4)),
             *(dev.array(chunk_cap, t) for t in (np.int32, f4, f4)), self.small_roots, self.sel_tri, self.sel_lo,
             self.sel_hi, dev.array(sel_cap, np.int32), dev.array(6 * sel_cap, cltypes.ulong2),
             *(dev.array(sn_cap, t) for t in (cltypes.int2, np.uint64, cltypes.int2, np.uint64, np.int32, np.int64)),
@@ -286,11 +291,15 @@ class _Build:
             bounds(bound, *bounds_args)
         else:
             bounds.groups(bound, self.config.chunk_group, *bounds_args)
-        # each node's plane, each element's sides and clipped boxes
-        node_split, node_mode = dev.array(active, np.float32), dev.array(active, np.int32)
+        # each node's plane (after the cuts it chains where no child can spend
+        # the element budget), each element's sides and clipped boxes
+        budget = ELEMENT_BUDGET * self.count + 65536
+        node_split, node_mode, node_chain = (dev.array(active, t) for t in (np.float32, np.int32, np.int32))
+        chain_cut = dev.array(MAX_CHAIN * active, cltypes.int2)
         self.kernel("KdBuild_large_split")(
             active, self.act_lo.data, self.act_hi.data, self.act_info.data, chunk_base.data, chunk_lo.data,
-            chunk_hi.data, i32(active), node_split.data, node_mode.data)
+            chunk_hi.data, i32(active), i32(self.max_depth), i32(2 * elements <= budget), node_split.data,
+            node_mode.data, node_chain.data, chain_cut.data)
         flags = dev.array(elements, np.int64)
         boxes = [dev.array(elements, cltypes.float4) for _ in range(4)]
         self.kernel("KdBuild_large_classify")(
@@ -300,11 +309,10 @@ class _Build:
         primitives.scan(dev, flags.data, elements, "long", out=flag_scan.data, total=total_l.data)
         # children counts, with every node a leaf once the element budget is spent
         node_counts, counters, counter_scan = (dev.array(active, t) for t in (cltypes.int2, cltypes.int8, cltypes.int8))
-        budget = ELEMENT_BUDGET * self.count + 65536
         for force_leaf in (0, 1):
             self.kernel("KdBuild_large_children")(
                 active, self.act_lo.data, self.act_hi.data, self.act_info.data, node_split.data, node_mode.data,
-                flag_scan.data, total_l.data, i32(elements), i32(active),
+                node_chain.data, chain_cut.data, flag_scan.data, total_l.data, i32(elements), i32(active),
                 i32(self.max_depth), i32(force_leaf), node_counts.data, counters.data)
             primitives.scan(dev, counters.data, active, "int8", out=counter_scan.data, total=total_8.data)
             totals = _values(dev, total_8, np.int32)
@@ -321,10 +329,10 @@ class _Build:
         node_dest = dev.array(active, cltypes.int4)
         self.kernel("KdBuild_large_emit")(
             active, self.act_lo.data, self.act_hi.data, self.act_info.data, node_split.data, node_mode.data,
-            node_counts.data, counter_scan.data, i32(active), i32(self.max_depth), i32(force_leaf), i32(self.rec_count),
-            i32(self.root_count), i32(self.small_count), i32(self.leaf_count), self.rec_lo.data, self.rec_hi.data,
-            self.rec_info.data, self.rec_split.data, next_lo.data, next_hi.data, next_info.data,
-            self.small_roots.data, node_dest.data)
+            node_chain.data, chain_cut.data, node_counts.data, counter_scan.data, i32(active), i32(self.max_depth),
+            i32(force_leaf), i32(self.rec_count), i32(self.root_count), i32(self.small_count), i32(self.leaf_count),
+            self.rec_lo.data, self.rec_hi.data, self.rec_info.data, self.rec_split.data, next_lo.data, next_hi.data,
+            next_info.data, self.small_roots.data, node_dest.data)
         next_tri, next_el_lo, next_el_hi = (dev.array(next_elements, t) for t in (np.int32, cltypes.float4, cltypes.float4))
         self.kernel("KdBuild_large_scatter")(
             elements, self.el_tri.data, el_node.data, self.act_info.data, flags.data, flag_scan.data,
@@ -401,8 +409,9 @@ class _Build:
         for begin, end in reversed(self.batches):
             self.kernel("KdBuild_subtree_size")(end - begin, self.rec_info.data, i32(begin), i32(end), size.data)
         dev.fill(addr.data, 0, 4)
-        for begin, end in self.batches:
-            self.kernel("KdBuild_preorder")(end - begin, self.rec_info.data, size.data, i32(begin), i32(end), addr.data)
+        for (begin, end), (next_begin, next_end) in zip(self.batches, self.batches[1:] + [(n, n)]):
+            self.kernel("KdBuild_preorder")(end - begin, self.rec_info.data, size.data, i32(begin), i32(end),
+                                            i32(next_begin), i32(next_end), addr.data)
         nodes = dev.array(n, KDNODE_DTYPE)
         self.kernel("KdBuild_output")(n, self.rec_info.data, self.rec_split.data, addr.data, i32(n), nodes.data)
         return nodes

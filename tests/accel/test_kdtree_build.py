@@ -469,6 +469,38 @@ def test_the_one_work_item_build_makes_the_level_by_level_tree(device, name):
     assert_same_tree(serial, launched)
 
 
+def tree_shape(tree):
+    """The tree as a list in preorder: (axis, split, right child) for an
+    inner node, the triangle list for a leaf (where the lists lie in the
+    leaf array depends on the level a leaf was made in)."""
+    nodes, leaf_tris = tree.nodes.get(), tree.leaf_tris.get()
+    return [tuple(leaf_tris[n["child"]: n["child"] + n["count"]]) if n["axis"] == kdtree_build.LEAF
+            else (int(n["axis"]), float(n["split"]), int(n["child"])) for n in nodes]
+
+
+@pytest.mark.parametrize("serial_max", [0, 1 << 30], ids=["launched", "one_work_item"])
+def test_cuts_chained_in_one_level_make_the_tree_of_one_cut_a_level(device, monkeypatch, serial_max):
+    """A large node's empty-space cuts made before its split in one level
+    (its elements passed over once) against one cut a level: the same
+    splits and leaf lists in the same preorder, in fewer levels where cuts
+    are (the sphere, the fan, the stack)."""
+    fewer = []
+    for name, make in sorted(MASK_SCENES.items()) + [("stack", SCENES["stack"])]:
+        verts_dev, count = device_verts(device, make())
+        chained = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max)
+        monkeypatch.setattr(kdtree_build, "MAX_CHAIN", 0)
+        level_by_level = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=serial_max)
+        monkeypatch.undo()
+        assert tree_shape(chained) == tree_shape(level_by_level), name
+        same = ("nodes", "leaves", "leaf_references", "depth", "small_roots", "max_leaf_size")
+        assert {k: chained.stats[k] for k in same} == {k: level_by_level.stats[k] for k in same}, name
+        assert chained.stats["sah_cost"] == pytest.approx(level_by_level.stats["sah_cost"], rel=1e-9)
+        assert chained.stats["large_levels"] <= level_by_level.stats["large_levels"], name
+        if chained.stats["large_levels"] < level_by_level.stats["large_levels"]:
+            fewer.append(name)
+    assert {"sphere", "fan", "stack"} <= set(fewer)
+
+
 @pytest.mark.parametrize("room", ["elements", "small", "records", "leaves", "small_nodes"])
 def test_the_one_work_item_build_falls_back_when_it_outgrows_its_room(device, monkeypatch, room):
     monkeypatch.setitem(kdtree_build.SERIAL_ROOM, room, 0)
