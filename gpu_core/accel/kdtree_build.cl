@@ -1116,7 +1116,8 @@ __kernel void KdBuild_serial(
     __global float4 *below_hi, __global float4 *above_lo, __global float4 *above_hi, __global float4 *act_lo,
     __global float4 *act_hi, __global int4 *act_info, __global float4 *nact_lo, __global float4 *nact_hi,
     __global int4 *nact_info, __global int *chunk_base, __global float *node_split, __global int *node_mode,
-    __global int *node_chain, __global int2 *chain_cut, __global int2 *node_counts, __global int8 *counters, __global int8 *counter_scan, __global int4 *node_dest,
+    __global int *node_chain, __global int2 *chain_cut, __global int2 *node_counts, __global int8 *counters,
+    __global int8 *counter_scan, __global int4 *node_dest,
     __global int *chunk_node, __global float4 *chunk_lo, __global float4 *chunk_hi, __global int4 *small_roots,
     __global int *sel_tri, __global float4 *sel_lo, __global float4 *sel_hi, __global int *sel_root,
     __global ulong2 *cand, __global int2 *sn_node, __global ulong *sn_mask, __global int2 *nsn_node,
@@ -1191,8 +1192,9 @@ __kernel void KdBuild_serial(
             return;
         for (int i = 0; i < active; ++i)
             KdBuild_large_emit_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut,
-                                  node_counts, counter_scan, max_depth, force_leaf, rec_count, root_count, small_count, leaf_count, rec_lo,
-                                  rec_hi, rec_info, rec_split, nact_lo, nact_hi, nact_info, small_roots, node_dest);
+                                  node_counts, counter_scan, max_depth, force_leaf, rec_count, root_count, small_count,
+                                  leaf_count, rec_lo, rec_hi, rec_info, rec_split, nact_lo, nact_hi, nact_info,
+                                  small_roots, node_dest);
         for (int e = 0; e < elements; ++e)
             KdBuild_large_scatter_at(e, el_tri, el_node, act_info, flags, flag_scan, below_lo, below_hi, above_lo,
                                      above_hi, node_dest, nel_tri, nel_lo, nel_hi, sel_tri, sel_lo, sel_hi, leaf_tris);
