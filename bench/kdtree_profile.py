@@ -73,6 +73,7 @@ def levels(device, triangles: np.ndarray) -> list[dict]:
 
         def split(n, *args):
             launch(n, *args)
+            # KdBuild_large_split's arguments: ..., n (6), max_depth, chain, node_split, node_mode (10), node_chain
             count, node_mode, node_chain = int(args[6]), args[10], args[11]
             kinds = device.read(node_mode, count, np.int32) >> 2
             rows[-1]["kinds"] = [int((kinds == k).sum()) for k in range(len(KINDS))]

@@ -216,10 +216,18 @@ inline int KdBuild_empty_cut(float4 lo, float4 hi, float4 cell_lo, float4 cell_h
     return kind;
 }
 
+/* The cell [*lo, *hi] cut to one side of a plane: below it (side 0) or above. */
+inline void KdBuild_child_cell(int axis, float plane, int side, float4 *lo, float4 *hi) {
+    if (side == 0) *hi = Axis_with(*hi, axis, plane);
+    else *lo = Axis_with(*lo, axis, plane);
+}
+
+/* The side a cut (mode) keeps: above a cut of the empty space below. */
+inline int KdBuild_kept_side(int mode) { return (mode >> 2) == KD_CUT_LOW ? 1 : 0; }
+
 /* The cell of what a cut (mode, plane) keeps of [*lo, *hi]. */
 inline void KdBuild_cut_cell(int mode, float plane, float4 *lo, float4 *hi) {
-    if ((mode >> 2) == KD_CUT_LOW) *lo = Axis_with(*lo, mode & 3, plane);
-    else *hi = Axis_with(*hi, mode & 3, plane);
+    KdBuild_child_cell(mode & 3, plane, KdBuild_kept_side(mode), lo, hi);
 }
 
 /* Per node: its bounds from its chunks (segmented reduction, the chunks of
@@ -482,20 +490,19 @@ inline void KdBuild_large_emit_at(
     int depth = KdBuild_depth(info);
     for (int j = 0; j < node_chain[i]; ++j, ++depth) {
         int2 cut = chain_cut[KD_MAX_CHAIN * i + j];
-        int left = rec_base + base.s5, kept = (cut.x >> 2) == KD_CUT_LOW ? 1 : 0;
+        int left = rec_base + base.s5;
         base.s5 += 2;
         rec_info[info.z] = (int4)(cut.x & 3, left, left + 1, depth);
         rec_split[info.z] = as_float(cut.y);
         for (int side = 0; side < 2; ++side) {
             float4 lo = cell_lo, hi = cell_hi;
-            if (side == 0) hi = Axis_with(hi, cut.x & 3, as_float(cut.y));
-            else lo = Axis_with(lo, cut.x & 3, as_float(cut.y));
+            KdBuild_child_cell(cut.x & 3, as_float(cut.y), side, &lo, &hi);
             rec_lo[left + side] = lo;
             rec_hi[left + side] = hi;
             rec_info[left + side] = (int4)(KD_LEAF, 0, 0, depth + 1);
         }
         KdBuild_cut_cell(cut.x, as_float(cut.y), &cell_lo, &cell_hi);
-        info.z = left + kept;
+        info.z = left + KdBuild_kept_side(cut.x);
     }
     info.w = depth | (KdBuild_bad(info) << 16);
     int mode = node_mode[i];
@@ -516,8 +523,7 @@ inline void KdBuild_large_emit_at(
         int child = left + side;
         int count = side == 0 ? counts.x : counts.y;
         float4 lo = cell_lo, hi = cell_hi;
-        if (side == 0) hi = Axis_with(hi, axis, plane);
-        else lo = Axis_with(lo, axis, plane);
+        KdBuild_child_cell(axis, plane, side, &lo, &hi);
         rec_lo[child] = lo;
         rec_hi[child] = hi;
         rec_info[child] = (int4)(KD_LEAF, 0, 0, depth + 1);
