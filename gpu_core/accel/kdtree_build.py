@@ -42,6 +42,7 @@ from ..device import Device, primitives
 from ..device.constants import KD_LEAF as LEAF
 from ..device.constants import KD_MAX_DEPTH as MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE
+from ..device.select import is_pocl
 from ..device.timer import StageTimer
 from ..errors import check_stop
 from . import kdtree_blocks
@@ -58,6 +59,8 @@ BAD_SPLITS = 2  # median splits in a row without progress allowed before a large
 SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
 PROGRAM = "accel/kdtree_build.cl"
+RUN = 64  # large-stage elements a CPU work-item classifies and scatters in a row (32-128 alike at 636k)
+PREFETCH_AHEAD = 16  # elements ahead in a run the classification asks for a straddler's corners (16-64 alike)
 SERIAL_MAX = 12288  # largest mesh one work-item builds on a CPU device (as fast as two cores' launches at ~15k)
 # room of the one work-item build, per triangle, plus SERIAL_SLACK (measured on blob meshes, the demo
 # scenes and triangle soups: at most 1.45 elements in a level, 1.9 small-root elements, 3.9 records,
@@ -97,7 +100,7 @@ class _Config:
     """Group sizes and the program's defines on one device."""
 
     def __init__(self, device: Device, sah_lanes: int | None, sorted_masks: bool | None = None,
-                 blocks: bool | None = None):
+                 blocks: bool | None = None, runs: bool | None = None):
         max_group = int(device.device.max_work_group_size)
         self.chunk_group = 1 << int(math.log2(min(CHUNK, max_group)))
         self.sah_group = 1 << int(math.log2(min(SAH_GROUP, max_group)))
@@ -112,6 +115,14 @@ class _Config:
         # work-item per root and axis; other devices one work-item per
         # candidate (the sorted form's private arrays were not measured there)
         self.sorted_masks = device.is_cpu if sorted_masks is None else bool(sorted_masks)
+        # a CPU's work-item takes a run of the large stage's elements, and asks
+        # for a straddler's corners ahead of its clipping, where that was
+        # measured to pay (Intel's runtime; not measured on PoCL); one element
+        # a work-item elsewhere
+        if runs is None:
+            runs = device.is_cpu and not is_pocl(device.device)
+        self.run = RUN if runs else 1
+        self.prefetch_ahead = PREFETCH_AHEAD if runs else 0
         # the SAH weighs a node step against how its leaves will be tested
         self.cost_traverse = cost_traverse(kdtree_blocks.wanted(device) if blocks is None else bool(blocks))
         self.defines = {
@@ -119,6 +130,7 @@ class _Config:
             "KD_COST_TRAVERSE": f"{self.cost_traverse!r}f", "KD_BAD_SPLITS": BAD_SPLITS, "KD_SAH_GROUP": self.sah_group,
             "KD_SAH_LANES": self.sah_lanes, "KD_CHUNK_LANES": self.chunk_lanes,
             "KD_SORTED_MASKS": int(self.sorted_masks), "KD_MAX_CHAIN": MAX_CHAIN,
+            "KD_RUN": self.run, "KD_PREFETCH_AHEAD": self.prefetch_ahead,
         }
 
 
@@ -302,8 +314,9 @@ class _Build:
             node_mode.data, node_chain.data, chain_cut.data)
         flags = dev.array(elements, np.int64)
         boxes = [dev.array(elements, cltypes.float4) for _ in range(4)]
+        element_items = -(-elements // self.config.run)  # work-items of the element kernels
         self.kernel("KdBuild_large_classify")(
-            elements, self.verts.data, self.el_tri.data, self.el_lo.data, self.el_hi.data, el_node.data,
+            element_items, self.verts.data, self.el_tri.data, self.el_lo.data, self.el_hi.data, el_node.data,
             node_split.data, node_mode.data, i32(elements), self.eps, flags.data, *[b.data for b in boxes])
         flag_scan = dev.array(elements, np.int64)
         primitives.scan(dev, flags.data, elements, "long", out=flag_scan.data, total=total_l.data)
@@ -335,7 +348,7 @@ class _Build:
             next_info.data, self.small_roots.data, node_dest.data)
         next_tri, next_el_lo, next_el_hi = (dev.array(next_elements, t) for t in (np.int32, cltypes.float4, cltypes.float4))
         self.kernel("KdBuild_large_scatter")(
-            elements, self.el_tri.data, el_node.data, self.act_info.data, flags.data, flag_scan.data,
+            element_items, self.el_tri.data, el_node.data, self.act_info.data, flags.data, flag_scan.data,
             *[b.data for b in boxes], node_dest.data, i32(elements), next_tri.data, next_el_lo.data, next_el_hi.data,
             self.sel_tri.data, self.sel_lo.data, self.sel_hi.data, self.leaf_tris.data)
         self.batches.append((self.rec_count, self.rec_count + rec_new))
@@ -437,7 +450,7 @@ class _Build:
 
 def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int | None = None,
                should_stop: Callable[[], bool] | None = None, serial_max: int | None = None,
-               sorted_masks: bool | None = None, blocks: bool | None = None) -> BuildOutput:
+               sorted_masks: bool | None = None, blocks: bool | None = None, runs: bool | None = None) -> BuildOutput:
     """The kd-tree of ``count`` triangles whose corners are ``verts`` (3 float4 each).
 
     ``sah_lanes`` (a power of two, at most ``SAH_GROUP``) sets the work-items
@@ -449,9 +462,11 @@ def build_tree(device: Device, verts: cla.Array, count: int, *, sah_lanes: int |
     masks from sorted bounds (None: on a CPU device); the tree is the same.
     ``blocks``: whether its leaves will get blocks (None: where the device
     wants them, kdtree_blocks.wanted), which sets the SAH's cost of a node
-    step (cost_traverse).
+    step (cost_traverse). ``runs``: the large stage's element kernels take
+    RUN elements a work-item, asking for straddlers' corners ahead (None: on
+    a CPU device other than PoCL); the tree is the same.
     """
-    config = _Config(device, sah_lanes, sorted_masks, blocks)
+    config = _Config(device, sah_lanes, sorted_masks, blocks, runs)
     build = _Build(device, verts, count, config, should_stop)
     timer = build.timer
     with timer.stage("setup"):

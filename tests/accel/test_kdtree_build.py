@@ -422,6 +422,21 @@ def test_candidate_masks_from_sorted_bounds_make_the_same_tree(device, name, ser
     assert_same_tree(by_sort, by_candidate)
 
 
+@pytest.mark.parametrize("name", ["random_soup", "big_and_small", "sphere", "degenerate_soup", "stack"])
+def test_element_runs_make_the_same_tree_as_one_element_a_work_item(device, name, monkeypatch):
+    """The large stage's classification and scatter taking runs of elements
+    a work-item (a CPU's form, asking for straddlers' corners ahead) against
+    one element a work-item: the same tree, on scenes whose levels end inside
+    a run and straddle planes (short runs, so that every level has several)."""
+    monkeypatch.setattr(kdtree_build, "RUN", 7)
+    monkeypatch.setattr(kdtree_build, "PREFETCH_AHEAD", 3)
+    verts_dev, count = device_verts(device, {**MASK_SCENES, **SCENES}[name]())
+    in_runs = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=0, runs=True)
+    one_each = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=0, runs=False)
+    assert in_runs.stats["large_levels"] > 1
+    assert_same_tree(in_runs, one_each)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_candidate_masks_from_sorted_bounds_match_each_candidate_against_every_element(device, seed):
     """The two mask kernels side by side, mask for mask, on small roots of 1
