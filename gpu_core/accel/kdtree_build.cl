@@ -828,21 +828,48 @@ inline void KdBuild_consider(int c, int k, ulong mask, int4 root, const KdSahCel
                            cell, best_raw, best_cand);
 }
 
-/* The six candidates of the small root's element k in order (low, high
- * face on x, then y, then z), each with its axis known where it is
- * compiled. */
+/* Raw costs (KdBuild_consider_plane's expression) of three planes, one an
+ * axis, as the lanes x, y, z; infinity where a plane is outside the open
+ * cell. */
+inline float4 KdBuild_raw3(float4 plane, float4 below, float4 above, const KdSahCell *cell) {
+    float4 raw = below * (cell->cap + (plane - cell->lo) * cell->side) + above * (cell->cap + (cell->hi - plane) * cell->side);
+    return select((float4)(INFINITY), raw, isless(cell->lo, plane) & isless(plane, cell->hi));
+}
+
+/* Candidate c with raw cost raw kept when it is the cheapest so far. */
+inline void KdBuild_keep(float raw, int c, float *best_raw, int *best_cand) {
+    if (raw < *best_raw) {
+        *best_raw = raw;
+        *best_cand = c;
+    }
+}
+
+/* The six candidates of the small root's element k: its low faces' costs
+ * and its high faces' each as one float4 (the same floats as one plane at
+ * a time), kept in candidate order (low, high face on x, then y, then z). */
 inline void KdBuild_consider_element(int k, ulong mask, int4 root, const KdSahCell *cell,
                                      const __global float4 *sel_lo, const __global float4 *sel_hi,
                                      const __global ulong2 *cand, float *best_raw, int *best_cand) {
-    float4 e_lo = sel_lo[root.x + k], e_hi = sel_hi[root.x + k];
     const __global ulong2 *m = cand + 6 * (root.x + k);
+    ulong2 m0 = m[0], m1 = m[1], m2 = m[2], m3 = m[3], m4 = m[4], m5 = m[5];
+    /* counts through int, as KdBuild_consider_plane's */
+    float4 below_lo = (float4)((float)(int)popcount(m0.x & mask), (float)(int)popcount(m2.x & mask),
+                               (float)(int)popcount(m4.x & mask), 0.0f);
+    float4 above_lo = (float4)((float)(int)popcount(m0.y & mask), (float)(int)popcount(m2.y & mask),
+                               (float)(int)popcount(m4.y & mask), 0.0f);
+    float4 below_hi = (float4)((float)(int)popcount(m1.x & mask), (float)(int)popcount(m3.x & mask),
+                               (float)(int)popcount(m5.x & mask), 0.0f);
+    float4 above_hi = (float4)((float)(int)popcount(m1.y & mask), (float)(int)popcount(m3.y & mask),
+                               (float)(int)popcount(m5.y & mask), 0.0f);
+    float4 raw_lo = KdBuild_raw3(sel_lo[root.x + k], below_lo, above_lo, cell);
+    float4 raw_hi = KdBuild_raw3(sel_hi[root.x + k], below_hi, above_hi, cell);
     int c = 6 * k;
-    KdBuild_consider_plane(c, 0, e_lo.x, m[0], mask, cell, best_raw, best_cand);
-    KdBuild_consider_plane(c + 1, 0, e_hi.x, m[1], mask, cell, best_raw, best_cand);
-    KdBuild_consider_plane(c + 2, 1, e_lo.y, m[2], mask, cell, best_raw, best_cand);
-    KdBuild_consider_plane(c + 3, 1, e_hi.y, m[3], mask, cell, best_raw, best_cand);
-    KdBuild_consider_plane(c + 4, 2, e_lo.z, m[4], mask, cell, best_raw, best_cand);
-    KdBuild_consider_plane(c + 5, 2, e_hi.z, m[5], mask, cell, best_raw, best_cand);
+    KdBuild_keep(raw_lo.x, c, best_raw, best_cand);
+    KdBuild_keep(raw_hi.x, c + 1, best_raw, best_cand);
+    KdBuild_keep(raw_lo.y, c + 2, best_raw, best_cand);
+    KdBuild_keep(raw_hi.y, c + 3, best_raw, best_cand);
+    KdBuild_keep(raw_lo.z, c + 4, best_raw, best_cand);
+    KdBuild_keep(raw_hi.z, c + 5, best_raw, best_cand);
 }
 
 /* The share of lane `lane` (of KD_SAH_LANES) in small node i's search: its

@@ -422,6 +422,18 @@ def test_candidate_masks_from_sorted_bounds_make_the_same_tree(device, name, ser
     assert_same_tree(by_sort, by_candidate)
 
 
+@pytest.mark.parametrize("name", sorted(MASK_SCENES))
+def test_one_lane_searching_an_element_six_planes_at_once_picks_what_lanes_plane_by_plane_pick(device, name):
+    """One lane's search (a CPU's) takes an element's six candidate planes as
+    two float4 of costs; several lanes take them one at a time: the same
+    costs, the same cheapest candidate with ties to the lowest, so the same
+    tree, on scenes full of tied and flat bounds."""
+    verts_dev, count = device_verts(device, MASK_SCENES[name]())
+    one_lane = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=0)
+    plane_by_plane = build_tree(device, verts_dev, count, sah_lanes=8, sorted_masks=True)
+    assert_same_tree(one_lane, plane_by_plane)
+
+
 @pytest.mark.parametrize("name", ["random_soup", "big_and_small", "sphere", "degenerate_soup", "stack"])
 def test_element_runs_make_the_same_tree_as_one_element_a_work_item(device, name, monkeypatch):
     """The large stage's classification and scatter taking runs of elements
