@@ -406,8 +406,10 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
                                      __global float4 *below_hi,
                                      __global float4 *above_lo,
                                      __global float4 *above_hi) {
-    /* KD_RUN elements in a row (on a CPU: the runtime's cost per work-item
-     * paid once a run; 636k triangles: the large stage 163 -> 137 ms) */
+    /* KD_RUN elements in a row (on a CPU the corners asked for ahead are then
+     * for this core's own later elements, and the runtime's cost per
+     * work-item is paid once a run; 636k triangles: the large stage 163 ->
+     * 137 ms) */
     int first = Launch_global_id() * KD_RUN, end = min(n, first + KD_RUN);
     for (int e = first; e < end; ++e) {
 #if KD_PREFETCH_AHEAD > 0
@@ -828,11 +830,12 @@ inline void KdBuild_consider(int c, int k, ulong mask, int4 root, const KdSahCel
                            cell, best_raw, best_cand);
 }
 
-/* Raw costs (KdBuild_consider_plane's expression) of three planes, one an
- * axis, as the lanes x, y, z; infinity where a plane is outside the open
+/* Raw costs (KdBuild_consider_plane's expression) of three planes, on x, y
+ * and z, as the lanes x, y, z; infinity where a plane is outside the open
  * cell. */
 inline float4 KdBuild_raw3(float4 plane, float4 below, float4 above, const KdSahCell *cell) {
-    float4 raw = below * (cell->cap + (plane - cell->lo) * cell->side) + above * (cell->cap + (cell->hi - plane) * cell->side);
+    float4 raw = below * (cell->cap + (plane - cell->lo) * cell->side) +
+                 above * (cell->cap + (cell->hi - plane) * cell->side);
     return select((float4)(INFINITY), raw, isless(cell->lo, plane) & isless(plane, cell->hi));
 }
 
