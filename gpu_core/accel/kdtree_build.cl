@@ -323,6 +323,14 @@ __kernel void KdBuild_large_split(const __global float4 *act_lo,
                                node_split, node_mode, node_chain, chain_cut);
 }
 
+/* KdBuild_sides of box [lo, hi] against a split node's plane: on the
+ * node's axis, by the rule of its mode (mode & 3 the axis, mode >> 2 how
+ * the node is divided). */
+inline int KdBuild_box_sides(float4 lo, float4 hi, int mode, float plane) {
+    int axis = mode & 3;
+    return KdBuild_sides(Axis_of(lo, axis), Axis_of(hi, axis), plane, (mode >> 2) == KD_CUT_LOW);
+}
+
 /* Per element: the sides of its node's plane it goes to (packed as
  * below | above << 32 for the scan) and its bounds on each side. A
  * straddling triangle is clipped to its element's box once, that polygon
@@ -346,8 +354,7 @@ inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const
         return;
     }
     float plane = node_split[node];
-    int sides = KdBuild_sides(Axis_of(lo, axis), Axis_of(hi, axis), plane,
-                              kind == KD_CUT_LOW);
+    int sides = KdBuild_box_sides(lo, hi, mode, plane);
     if (sides == 3) {
         int t = el_tri[e];
         float4 v0 = verts[3 * t], v1 = verts[3 * t + 1], v2 = verts[3 * t + 2];
@@ -387,9 +394,7 @@ inline void KdBuild_prefetch_straddler(int e, const __global float4 *verts, cons
                                        const __global int *node_mode) {
     int node = el_node[e];
     int mode = node_mode[node];
-    int axis = mode & 3, kind = mode >> 2;
-    if (kind != KD_SPLIT_NONE &&
-        KdBuild_sides(Axis_of(el_lo[e], axis), Axis_of(el_hi[e], axis), node_split[node], kind == KD_CUT_LOW) == 3)
+    if ((mode >> 2) != KD_SPLIT_NONE && KdBuild_box_sides(el_lo[e], el_hi[e], mode, node_split[node]) == 3)
         prefetch(verts + 3 * el_tri[e], 3);
 }
 

@@ -10,10 +10,10 @@ a bound and reads its own count on the device):
   median split, triangles clipped to the children (on Intel's CPU runtime
   ``RUN`` elements a work-item, straddlers' corners asked for ahead), counts
   and compaction by prefix sums; children with at most ``SMALL`` triangles
-  become small roots; a larger child becomes a leaf after more than ``BAD_SPLITS``
-  median splits in a row that made no progress for it (it kept all its
-  parent's triangles, as around a fan's centre or in a stack, or the
-  split did not pay by the SAH);
+  become small roots; a larger child becomes a leaf after more than
+  ``BAD_SPLITS`` median splits in a row that made no progress for it (it
+  kept all its parent's triangles, as around a fan's centre or in a stack,
+  or the split did not pay by the SAH);
 * small-node stage: candidate planes and their 64-bit side masks per small
   root, the SAH of every candidate of every node (a work-item per node on a
   CPU, a work-group per node elsewhere), a leaf where not splitting is
