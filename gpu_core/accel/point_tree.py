@@ -40,8 +40,9 @@ def _as_points(array, name: str) -> np.ndarray:
 
 def morton_codes(points: np.ndarray) -> np.ndarray:
     """(N,) uint32 Morton codes of (N, 3) ``points``, 10 bits an axis over their box."""
-    lo = points.min(axis=0)
-    scale = 1023.0 / np.maximum(points.max(axis=0) - lo, 1e-30)
+    # axis by axis (numpy reduces short rows slowly: 1 ms against 0.05 for 50k points)
+    lo = np.array([points[:, a].min() for a in range(3)])
+    scale = 1023.0 / np.maximum(np.array([points[:, a].max() for a in range(3)]) - lo, 1e-30)
     cells = ((points - lo) * scale).astype(np.uint32)
 
     def spread(v):
@@ -55,8 +56,11 @@ def morton_codes(points: np.ndarray) -> np.ndarray:
 
 def _spatial_order(points: np.ndarray) -> np.ndarray:
     """A permutation visiting ``points`` along a Morton curve, so that
-    neighbouring work items search neighbouring parts of the tree."""
-    return np.argsort(morton_codes(points), kind="stable")
+    neighbouring work items search neighbouring parts of the tree (each
+    query's answer is its own: the order of equal codes does not matter,
+    and numpy's default sort takes 0.6 ms for 50k codes where its stable
+    one takes 2.8)."""
+    return np.argsort(morton_codes(points))
 
 
 class PointTree:
