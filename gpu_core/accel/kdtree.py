@@ -14,13 +14,11 @@ from typing import Callable
 
 import numpy as np
 import pyopencl.array as cla
-from pyopencl import cltypes
 
-from ..device import Device
+from ..device import Device, primitives
 from ..device.constants import KD_LEAF as LEAF
 from ..device.constants import KD_MAX_DEPTH as MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE as NODE_DTYPE
-from ..device.layout import float4_rows
 from ..device.timer import StageTimer
 from ..errors import SceneError
 from . import kdtree_blocks
@@ -132,8 +130,7 @@ def build(device: Device, triangles: np.ndarray, should_stop: Callable[[], bool]
     timer = StageTimer()
     count = len(tris)
     with timer.stage("upload"):
-        verts = float4_rows(tris.reshape(-1, 3)) if count else np.zeros((3, 4), np.float32)
-        verts_dev = device.array_from(verts.view(cltypes.float4).reshape(-1))
+        verts_dev = primitives.float4_rows(device, tris.reshape(-1, 3) if count else np.zeros((3, 3), np.float32))
     want_blocks = kdtree_blocks.wanted(device) if blocks is None else blocks
     with timer.stage("build"):
         out = build_tree(device, verts_dev, count, should_stop=should_stop, blocks=want_blocks)

@@ -57,12 +57,12 @@ PRIM_SCAN(int8, int8)
 /* ---- reductions --------------------------------------------------------
  * out[c] = the reduction of chunk c; the host reduces the partials again
  * until one is left. */
-#define PRIM_REDUCE(T, NAME, ZERO, COMBINE)                                                       \
-    __kernel void Prim_reduce_##NAME(const __global T *in, const int n, __global T *out,          \
+#define PRIM_REDUCE(T, ACC, NAME, ZERO, COMBINE)                                                  \
+    __kernel void Prim_reduce_##NAME(const __global T *in, const int n, __global ACC *out,        \
                                      const int chunks) {                                          \
         int c = Launch_global_id();                                                               \
         if (c >= chunks) return;                                                                  \
-        T acc = ZERO;                                                                             \
+        ACC acc = ZERO;                                                                           \
         for (int i = c * PRIM_CHUNK, end = min(n, i + PRIM_CHUNK); i < end; ++i) {                \
             T b = in[i];                                                                          \
             acc = COMBINE(acc, b);                                                                \
@@ -71,10 +71,16 @@ PRIM_SCAN(int8, int8)
     }
 
 #define PRIM_ADD(a, b) ((a) + (b))
-PRIM_REDUCE(int4, sum_int4, (int4)(0), PRIM_ADD)
-PRIM_REDUCE(int4, max_int4, (int4)(INT_MIN), max)
-PRIM_REDUCE(float4, min_float4, (float4)(INFINITY), fmin)
-PRIM_REDUCE(float4, max_float4, (float4)(-INFINITY), fmax)
+PRIM_REDUCE(int4, int4, sum_int4, (int4)(0), PRIM_ADD)
+PRIM_REDUCE(int4, int4, max_int4, (int4)(INT_MIN), max)
+
+/* Bounds of float4 points in one pass over them: each partial a float8 of
+ * the lanes' minima (lo half) and maxima (hi half), reduced again as such. */
+inline float8 Prim_bounds_union(float8 a, float8 b) { return (float8)(fmin(a.lo, b.lo), fmax(a.hi, b.hi)); }
+inline float8 Prim_bounds_add(float8 a, float4 p) { return (float8)(fmin(a.lo, p), fmax(a.hi, p)); }
+#define PRIM_BOUNDS_EMPTY (float8)((float4)(INFINITY), (float4)(-INFINITY))
+PRIM_REDUCE(float4, float8, bounds_float4, PRIM_BOUNDS_EMPTY, Prim_bounds_add)
+PRIM_REDUCE(float8, float8, bounds_float8, PRIM_BOUNDS_EMPTY, Prim_bounds_union)
 
 /* Sums of float4 to float64 accuracy: each value is a float8 of the sum
  * (lo half) and the rounding error the sum lost (hi half), combined by
@@ -85,12 +91,18 @@ inline float8 Prim_two_sum(float8 a, float8 b) {
     float4 err = (a.lo - (s - bp)) + (b.lo - bp);
     return (float8)(s, a.hi + b.hi + err);
 }
-PRIM_REDUCE(float8, sum_float8, (float8)(0.0f), Prim_two_sum)
+PRIM_REDUCE(float8, float8, sum_float8, (float8)(0.0f), Prim_two_sum)
 
 /* float4 values as (value, no error) float8s, for Prim_reduce_sum_float8. */
 __kernel void Prim_float8_of(const __global float4 *in, const int n, __global float8 *out) {
     int i = Launch_global_id();
     if (i < n) out[i] = (float8)(in[i], (float4)(0.0f));
+}
+
+/* n packed 3-vectors (in: x, y, z, x, ...) as float4 rows with w = 0. */
+__kernel void Prim_float4_of_float3(const __global float *in, const int n, __global float4 *out) {
+    int i = Launch_global_id();
+    if (i < n) out[i] = (float4)(in[3 * i], in[3 * i + 1], in[3 * i + 2], 0.0f);
 }
 
 /* int values as (value, 0, 0, 0) int4s, for the int4 reductions. */

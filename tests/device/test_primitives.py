@@ -1,5 +1,5 @@
-"""Device scan, stable radix sort and group-by-key (gpu_core/device/primitives.py)
-against numpy."""
+"""Device scan, stable radix sort, group-by-key, bounds and float4 widening
+(gpu_core/device/primitives.py) against numpy."""
 
 import numpy as np
 import pytest
@@ -18,6 +18,23 @@ def test_exclusive_scan_equals_numpy_cumsum(device, n):
     total = primitives.exclusive_scan_total(device, buf, n)
     assert total == values.sum()
     np.testing.assert_array_equal(read(device, buf, n), np.cumsum(values) - values)
+
+
+@pytest.mark.parametrize("n", [1, 255, 256, 257, 70000])
+def test_bounds_in_one_pass_equal_numpy_minima_and_maxima(device, n):
+    points = np.random.default_rng(n).normal(0, 1e3, (n, 4)).astype(np.float32)
+    points[n // 2] = [-1e30, 3e30, 0, -2]  # a far point in the middle of a chunk
+    lo, hi = primitives.bounds(device, device.to_device(points), n)
+    np.testing.assert_array_equal(lo, points.min(axis=0))
+    np.testing.assert_array_equal(hi, points.max(axis=0))
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 70001])
+def test_float4_rows_widen_packed_vectors_with_w_zero(device, n):
+    vectors = np.random.default_rng(n).normal(0, 1, (n, 3)).astype(np.float32)
+    rows = device.get(primitives.float4_rows(device, vectors)).view(np.float32).reshape(-1, 4)[:n]
+    np.testing.assert_array_equal(rows[:, :3], vectors)
+    assert not rows[:, 3].any()
 
 
 @pytest.mark.parametrize("n, key_count", [(0, 5), (1, 1), (300, 1), (300, 3), (5000, 16384), (40000, 1 << 21)])
