@@ -332,12 +332,12 @@ inline int KdBuild_box_sides(float4 lo, float4 hi, int mode, float plane) {
 }
 
 /* Per element: the sides of its node's plane it goes to (packed as
- * below | above << 32 for the scan) and its bounds on each side. A
+ * below | above << 32 for the scan; also returned) and its bounds on each side. A
  * straddling triangle is clipped to its element's box once, that polygon
  * to each side of the plane widened by eps, and the triangle dropped from
  * a side it does not reach. Elements of an unsplit node all go "below",
  * to the node's own leaf. */
-inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const __global int *el_tri,
+inline long KdBuild_large_classify_at(int e, const __global float4 *verts, const __global int *el_tri,
                                       const __global float4 *el_lo, const __global float4 *el_hi,
                                       const __global int *el_node, const __global float *node_split,
                                       const __global int *node_mode, float eps, __global long *flags,
@@ -351,7 +351,7 @@ inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const
     below_hi[e] = above_hi[e] = hi;
     if (kind == KD_SPLIT_NONE) {
         flags[e] = 1;
-        return;
+        return 1;
     }
     float plane = node_split[node];
     int sides = KdBuild_box_sides(lo, hi, mode, plane);
@@ -381,7 +381,9 @@ inline void KdBuild_large_classify_at(int e, const __global float4 *verts, const
         }
         sides = kept;
     }
-    flags[e] = (long)(sides & 1) | ((long)(sides >> 1) << 32);
+    long flag = (long)(sides & 1) | ((long)(sides >> 1) << 32);
+    flags[e] = flag;
+    return flag;
 }
 
 /* Asks for element e's triangle corners if e straddles its node's plane,
@@ -406,7 +408,7 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
                                      const __global float *node_split,
                                      const __global int *node_mode,
                                      const int n, const float eps,
-                                     __global long *flags,
+                                     __global long *flags, __global long *run_sums,
                                      __global float4 *below_lo,
                                      __global float4 *below_hi,
                                      __global float4 *above_lo,
@@ -414,17 +416,31 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
     /* KD_RUN elements in a row (on a CPU the corners asked for ahead are then
      * for this core's own later elements, and the runtime's cost per
      * work-item is paid once a run; 636k triangles: the large stage 163 ->
-     * 137 ms) */
+     * 137 ms); the run's flags are summed for the scan (KdBuild_flag_prefix) */
     int first = Launch_global_id() * KD_RUN, end = min(n, first + KD_RUN);
+    long sum = 0;
     for (int e = first; e < end; ++e) {
 #if KD_PREFETCH_AHEAD > 0
         if (e + KD_PREFETCH_AHEAD < n)
             KdBuild_prefetch_straddler(e + KD_PREFETCH_AHEAD, verts, el_tri, el_lo, el_hi, el_node, node_split,
                                        node_mode);
 #endif
-        KdBuild_large_classify_at(e, verts, el_tri, el_lo, el_hi, el_node, node_split, node_mode, eps, flags, below_lo,
-                                  below_hi, above_lo, above_hi);
+        sum += KdBuild_large_classify_at(e, verts, el_tri, el_lo, el_hi, el_node, node_split, node_mode, eps, flags,
+                                         below_lo, below_hi, above_lo, above_hi);
     }
+    if (first < n) run_sums[Launch_global_id()] = sum;
+}
+
+/* The sum of the flags of the elements before e (of n): the exclusive scan
+ * of the runs' sums (run_scan; KD_RUN elements a run) at e's run, plus e's
+ * predecessors in its run; total (the sum of all) at e = n. */
+inline long KdBuild_flag_prefix(int e, int n, const __global long *flags, const __global long *run_scan,
+                                const __global long *total) {
+    if (e >= n) return total[0];
+    int start = e - e % KD_RUN;
+    long sum = run_scan[start / KD_RUN];
+    for (int k = start; k < e; ++k) sum += flags[k];
+    return sum;
 }
 
 /* Whether a large child of node `info` becomes a leaf: at the depth limit,
@@ -440,7 +456,7 @@ inline bool KdBuild_split_pays(float4 lo, float4 hi, int mode, float plane, int2
 }
 
 /* Per node: the element counts of its two children (from the scan of the
- * element flags), each child's class, and the node's contribution to the
+ * element flags' runs, KdBuild_flag_prefix), each child's class, and the node's contribution to the
  * level's counters: (large elements, small elements, leaf elements, large
  * nodes, small roots, new records, 0, 0). A child is an empty leaf when it
  * has no element, a small root with at most KD_SMALL, a leaf by
@@ -449,14 +465,16 @@ inline bool KdBuild_split_pays(float4 lo, float4 hi, int mode, float plane, int2
 inline void KdBuild_large_children_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
                                       const __global int4 *act_info, const __global float *node_split,
                                       const __global int *node_mode, const __global int *node_chain,
-                                      const __global int2 *chain_cut, const __global long *flag_scan,
-                                      const __global long *flag_total, int n_el, int max_depth, int force_leaf,
-                                      __global int2 *node_counts, __global int8 *counters) {
+                                      const __global int2 *chain_cut, const __global long *flags,
+                                      const __global long *run_scan, const __global long *flag_total, int n_el,
+                                      int max_depth, int force_leaf, __global int2 *node_counts,
+                                      __global int8 *counters) {
     float4 cell_lo, cell_hi;
     int4 info;
     int chained = KdBuild_chain_end(i, act_lo, act_hi, act_info, node_chain, chain_cut, &cell_lo, &cell_hi, &info);
     int end = info.x + info.y;
-    long sum = (end < n_el ? flag_scan[end] : flag_total[0]) - flag_scan[info.x];
+    long sum = KdBuild_flag_prefix(end, n_el, flags, run_scan, flag_total) -
+               KdBuild_flag_prefix(info.x, n_el, flags, run_scan, flag_total);
     int2 counts = (int2)((int)(sum & 0xffffffffL), (int)(sum >> 32));
     node_counts[i] = counts;
     int8 c = (int8)(0);
@@ -491,7 +509,8 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
                                      const __global int *node_mode,
                                      const __global int *node_chain,
                                      const __global int2 *chain_cut,
-                                     const __global long *flag_scan,
+                                     const __global long *flags,
+                                     const __global long *run_scan,
                                      const __global long *flag_total,
                                      const int n_el, const int n,
                                      const int max_depth, const int force_leaf,
@@ -499,8 +518,8 @@ __kernel void KdBuild_large_children(const __global float4 *act_lo,
                                      __global int8 *counters) {
     int i = Launch_global_id();
     if (i < n)
-        KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut, flag_scan,
-                                  flag_total, n_el, max_depth, force_leaf, node_counts, counters);
+        KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut, flags,
+                                  run_scan, flag_total, n_el, max_depth, force_leaf, node_counts, counters);
 }
 
 /* Per node: writes the records of its chain of cuts (each an inner node
@@ -610,18 +629,15 @@ __kernel void KdBuild_large_emit(
                               rec_hi, rec_info, rec_split, next_lo, next_hi, next_info, small_roots, node_dest);
 }
 
-/* Per element: copies it to each side it goes to, at its rank among its
- * node's elements on that side: into the next level's elements, the small
- * roots' elements, or a leaf's triangle list. */
+/* Element e of node `node` (its flag, its rank among the node's elements
+ * on each side: the flags' prefix at e less that at the node's first
+ * element) copied to each side it goes to: into the next level's
+ * elements, the small roots' elements, or a leaf's triangle list. */
 inline void KdBuild_large_scatter_at(
-    int e, const __global int *el_tri, const __global int *el_node, const __global int4 *act_info,
-    const __global long *flags, const __global long *flag_scan, const __global float4 *below_lo,
+    int e, int node, long flag, long rank, const __global int *el_tri, const __global float4 *below_lo,
     const __global float4 *below_hi, const __global float4 *above_lo, const __global float4 *above_hi,
     const __global int4 *node_dest, __global int *next_tri, __global float4 *next_lo, __global float4 *next_hi,
     __global int *small_tri, __global float4 *small_lo, __global float4 *small_hi, __global int *leaf_tris) {
-    int node = el_node[e];
-    long rank = flag_scan[e] - flag_scan[act_info[node].x];
-    long flag = flags[e];
     int4 dest = node_dest[node];
     int tri = el_tri[e];
     for (int side = 0; side < 2; ++side) {
@@ -644,10 +660,37 @@ inline void KdBuild_large_scatter_at(
     }
 }
 
+/* KdBuild_large_scatter_at for elements first .. end - 1 of n (a run, or
+ * all of them): the flags' prefix summed along them, a node's prefix taken
+ * where its first element is met (a node begun before `first` looks its
+ * up). A node's elements lie in a row from its first. */
+inline void KdBuild_large_scatter_run(
+    int first, int end, int n, const __global int *el_tri, const __global int *el_node,
+    const __global int4 *act_info, const __global long *flags, const __global long *run_scan,
+    const __global long *flag_total, const __global float4 *below_lo, const __global float4 *below_hi,
+    const __global float4 *above_lo, const __global float4 *above_hi, const __global int4 *node_dest,
+    __global int *next_tri, __global float4 *next_lo, __global float4 *next_hi, __global int *small_tri,
+    __global float4 *small_lo, __global float4 *small_hi, __global int *leaf_tris) {
+    long prefix = KdBuild_flag_prefix(first, n, flags, run_scan, flag_total), base = 0;
+    int node = -1;
+    for (int e = first; e < end; ++e) {
+        if (el_node[e] != node) {
+            node = el_node[e];
+            int node_first = act_info[node].x;
+            base = node_first == e ? prefix : KdBuild_flag_prefix(node_first, n, flags, run_scan, flag_total);
+        }
+        long flag = flags[e];
+        KdBuild_large_scatter_at(e, node, flag, prefix - base, el_tri, below_lo, below_hi, above_lo, above_hi,
+                                 node_dest, next_tri, next_lo, next_hi, small_tri, small_lo, small_hi, leaf_tris);
+        prefix += flag;
+    }
+}
+
 __kernel void KdBuild_large_scatter(
     const __global int *el_tri, const __global int *el_node,
     const __global int4 *act_info, const __global long *flags,
-    const __global long *flag_scan, const __global float4 *below_lo,
+    const __global long *run_scan, const __global long *flag_total,
+    const __global float4 *below_lo,
     const __global float4 *below_hi, const __global float4 *above_lo,
     const __global float4 *above_hi, const __global int4 *node_dest,
     const int n, __global int *next_tri, __global float4 *next_lo,
@@ -655,9 +698,10 @@ __kernel void KdBuild_large_scatter(
     __global float4 *small_lo, __global float4 *small_hi,
     __global int *leaf_tris) {
     int first = Launch_global_id() * KD_RUN, end = min(n, first + KD_RUN);
-    for (int e = first; e < end; ++e)
-        KdBuild_large_scatter_at(e, el_tri, el_node, act_info, flags, flag_scan, below_lo, below_hi, above_lo, above_hi,
-                                 node_dest, next_tri, next_lo, next_hi, small_tri, small_lo, small_hi, leaf_tris);
+    if (first < n)
+        KdBuild_large_scatter_run(first, end, n, el_tri, el_node, act_info, flags, run_scan, flag_total, below_lo,
+                                  below_hi, above_lo, above_hi, node_dest, next_tri, next_lo, next_hi, small_tri,
+                                  small_lo, small_hi, leaf_tris);
 }
 
 /* ---- small-node stage --------------------------------------------------- */
@@ -1180,7 +1224,7 @@ __kernel void KdBuild_serial(
     const int8 caps, __global float4 *rec_lo, __global float4 *rec_hi, __global int4 *rec_info,
     __global float *rec_split, __global int *el_tri, __global float4 *el_lo, __global float4 *el_hi,
     __global int *nel_tri, __global float4 *nel_lo, __global float4 *nel_hi, __global int *el_node,
-    __global long *flags, __global long *flag_scan, __global long *flag_total, __global float4 *below_lo,
+    __global long *flags, __global long *run_scan, __global long *flag_total, __global float4 *below_lo,
     __global float4 *below_hi, __global float4 *above_lo, __global float4 *above_hi, __global float4 *act_lo,
     __global float4 *act_hi, __global int4 *act_info, __global float4 *nact_lo, __global float4 *nact_hi,
     __global int4 *nact_info, __global int *chunk_base, __global float *node_split, __global int *node_mode,
@@ -1232,19 +1276,19 @@ __kernel void KdBuild_serial(
         for (int e = 0; e < elements; ++e)
             KdBuild_large_classify_at(e, verts, el_tri, el_lo, el_hi, el_node, node_split, node_mode, eps, flags,
                                       below_lo, below_hi, above_lo, above_hi);
-        long run = 0;
+        long sum = 0;
         for (int e = 0; e < elements; ++e) {
-            flag_scan[e] = run;
-            run += flags[e];
+            if (e % KD_RUN == 0) run_scan[e / KD_RUN] = sum;
+            sum += flags[e];
         }
-        flag_total[0] = run;
+        flag_total[0] = sum;
         /* children counts, with every node a leaf once the element budget is spent */
         int8 total;
         int force_leaf = 0;
         for (; force_leaf < 2; ++force_leaf) {
             for (int i = 0; i < active; ++i)
                 KdBuild_large_children_at(i, act_lo, act_hi, act_info, node_split, node_mode, node_chain, chain_cut,
-                                          flag_scan, flag_total, elements, max_depth, force_leaf, node_counts,
+                                          flags, run_scan, flag_total, elements, max_depth, force_leaf, node_counts,
                                           counters);
             total = (int8)(0);
             for (int i = 0; i < active; ++i) {
@@ -1263,9 +1307,9 @@ __kernel void KdBuild_serial(
                                   node_counts, counter_scan, max_depth, force_leaf, rec_count, root_count, small_count,
                                   leaf_count, rec_lo, rec_hi, rec_info, rec_split, nact_lo, nact_hi, nact_info,
                                   small_roots, node_dest);
-        for (int e = 0; e < elements; ++e)
-            KdBuild_large_scatter_at(e, el_tri, el_node, act_info, flags, flag_scan, below_lo, below_hi, above_lo,
-                                     above_hi, node_dest, nel_tri, nel_lo, nel_hi, sel_tri, sel_lo, sel_hi, leaf_tris);
+        KdBuild_large_scatter_run(0, elements, elements, el_tri, el_node, act_info, flags, run_scan, flag_total,
+                                  below_lo, below_hi, above_lo, above_hi, node_dest, nel_tri, nel_lo, nel_hi, sel_tri,
+                                  sel_lo, sel_hi, leaf_tris);
         batches[n_batches++] = (int2)(rec_count, rec_count + total.s5);
         rec_count += total.s5;
         root_count += total.s4;

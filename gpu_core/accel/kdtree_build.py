@@ -315,18 +315,19 @@ class _Build:
             node_mode.data, node_chain.data, chain_cut.data)
         flags = dev.array(elements, np.int64)
         boxes = [dev.array(elements, cltypes.float4) for _ in range(4)]
-        element_items = -(-elements // self.config.run)  # work-items of the element kernels
+        element_items = -(-elements // self.config.run)  # work-items of the element kernels: a run each
+        run_scan = dev.array(element_items, np.int64)  # each run's flag sum, then their exclusive scan
         self.kernel("KdBuild_large_classify")(
             element_items, self.verts.data, self.el_tri.data, self.el_lo.data, self.el_hi.data, el_node.data,
-            node_split.data, node_mode.data, i32(elements), self.eps, flags.data, *[b.data for b in boxes])
-        flag_scan = dev.array(elements, np.int64)
-        primitives.scan(dev, flags.data, elements, "long", out=flag_scan.data, total=total_l.data)
+            node_split.data, node_mode.data, i32(elements), self.eps, flags.data, run_scan.data,
+            *[b.data for b in boxes])
+        primitives.scan(dev, run_scan.data, element_items, "long", total=total_l.data)
         # children counts, with every node a leaf once the element budget is spent
         node_counts, counters, counter_scan = (dev.array(active, t) for t in (cltypes.int2, cltypes.int8, cltypes.int8))
         for force_leaf in (0, 1):
             self.kernel("KdBuild_large_children")(
                 active, self.act_lo.data, self.act_hi.data, self.act_info.data, node_split.data, node_mode.data,
-                node_chain.data, chain_cut.data, flag_scan.data, total_l.data, i32(elements), i32(active),
+                node_chain.data, chain_cut.data, flags.data, run_scan.data, total_l.data, i32(elements), i32(active),
                 i32(self.max_depth), i32(force_leaf), node_counts.data, counters.data)
             primitives.scan(dev, counters.data, active, "int8", out=counter_scan.data, total=total_8.data)
             totals = _values(dev, total_8, np.int32)
@@ -349,7 +350,7 @@ class _Build:
             next_info.data, self.small_roots.data, node_dest.data)
         next_tri, next_el_lo, next_el_hi = (dev.array(next_elements, t) for t in (np.int32, cltypes.float4, cltypes.float4))
         self.kernel("KdBuild_large_scatter")(
-            element_items, self.el_tri.data, el_node.data, self.act_info.data, flags.data, flag_scan.data,
+            element_items, self.el_tri.data, el_node.data, self.act_info.data, flags.data, run_scan.data, total_l.data,
             *[b.data for b in boxes], node_dest.data, i32(elements), next_tri.data, next_el_lo.data, next_el_hi.data,
             self.sel_tri.data, self.sel_lo.data, self.sel_hi.data, self.leaf_tris.data)
         self.batches.append((self.rec_count, self.rec_count + rec_new))

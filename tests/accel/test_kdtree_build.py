@@ -576,14 +576,18 @@ def test_a_straddling_triangle_gets_the_bounds_of_its_clipped_part_on_each_side(
     verts_dev, _ = device_verts(device, tris.astype(np.float32))
     float4 = lambda a: device.to_device(np.concatenate([a, np.zeros((n, 1))], 1).astype(np.float32))
     out = [device.empty(16 * n) for _ in range(4)]
-    flags = device.empty(8 * n)
-    defines = kdtree_build._Config(device, None).defines
-    device.kernel(kdtree_build.PROGRAM, "KdBuild_large_classify", defines)(
-        n, verts_dev.data, device.to_device(rows.astype(np.int32)), float4(lo), float4(hi),
+    flags, run_sums = device.empty(8 * n), device.empty(8 * n)
+    config = kdtree_build._Config(device, None)
+    runs = -(-n // config.run)
+    device.kernel(kdtree_build.PROGRAM, "KdBuild_large_classify", config.defines)(
+        runs, verts_dev.data, device.to_device(rows.astype(np.int32)), float4(lo), float4(hi),
         device.to_device(rows.astype(np.int32)), device.to_device(plane.astype(np.float32)),
-        device.to_device(axis.astype(np.int32)), np.int32(n), np.float32(eps), flags, *out)
+        device.to_device(axis.astype(np.int32)), np.int32(n), np.float32(eps), flags, run_sums, *out)
     below_lo, below_hi, above_lo, above_hi = (device.read(b, (n, 4), np.float32)[:, :3] for b in out)
     sides = device.read(flags, n, np.int64)
+    # each work-item's run of elements: their flags summed for the scan
+    np.testing.assert_array_equal(device.read(run_sums, runs, np.int64),
+                                  np.add.reduceat(sides, np.arange(0, n, config.run)))
     checked = 0
     for e in range(n):
         cell = [v for v in tris[e]]
