@@ -332,10 +332,10 @@ inline int KdBuild_box_sides(float4 lo, float4 hi, int mode, float plane) {
 }
 
 /* Per element: the sides of its node's plane it goes to (packed as
- * below | above << 32 for the scan; also returned) and its bounds on each side. A
- * straddling triangle is clipped to its element's box once, that polygon
- * to each side of the plane widened by eps, and the triangle dropped from
- * a side it does not reach. Elements of an unsplit node all go "below",
+ * below | above << 32 for the scan; also returned) and its bounds on each
+ * side. A straddling triangle is clipped to its element's box once, that
+ * polygon to each side of the plane widened by eps, and the triangle
+ * dropped from a side it does not reach. Elements of an unsplit node all go "below",
  * to the node's own leaf. */
 inline long KdBuild_large_classify_at(int e, const __global float4 *verts, const __global int *el_tri,
                                       const __global float4 *el_lo, const __global float4 *el_hi,
@@ -456,12 +456,13 @@ inline bool KdBuild_split_pays(float4 lo, float4 hi, int mode, float plane, int2
 }
 
 /* Per node: the element counts of its two children (from the scan of the
- * element flags' runs, KdBuild_flag_prefix), each child's class, and the node's contribution to the
- * level's counters: (large elements, small elements, leaf elements, large
- * nodes, small roots, new records, 0, 0). A child is an empty leaf when it
- * has no element, a small root with at most KD_SMALL, a leaf by
- * KdBuild_large_leaf, else a large node. The node is taken at the end of
- * its chain of cuts, each of which adds two records. */
+ * element flags' runs, KdBuild_flag_prefix), each child's class, and the
+ * node's contribution to the level's counters: (large elements, small
+ * elements, leaf elements, large nodes, small roots, new records, 0, 0).
+ * A child is an empty leaf when it has no element, a small root with at
+ * most KD_SMALL, a leaf by KdBuild_large_leaf, else a large node. The node
+ * is taken at the end of its chain of cuts, each of which adds two
+ * records. */
 inline void KdBuild_large_children_at(int i, const __global float4 *act_lo, const __global float4 *act_hi,
                                       const __global int4 *act_info, const __global float *node_split,
                                       const __global int *node_mode, const __global int *node_chain,
@@ -662,7 +663,7 @@ inline void KdBuild_large_scatter_at(
 
 /* KdBuild_large_scatter_at for elements first .. end - 1 of n (a run, or
  * all of them): the flags' prefix summed along them, a node's prefix taken
- * where its first element is met (a node begun before `first` looks its
+ * where its first element is met (a node begun before `first` looks it
  * up). A node's elements lie in a row from its first. */
 inline void KdBuild_large_scatter_run(
     int first, int end, int n, const __global int *el_tri, const __global int *el_node,
