@@ -335,8 +335,8 @@ inline int KdBuild_box_sides(float4 lo, float4 hi, int mode, float plane) {
  * below | above << 32 for the scan; also returned) and its bounds on each
  * side. A straddling triangle is clipped to its element's box once, that
  * polygon to each side of the plane widened by eps, and the triangle
- * dropped from a side it does not reach. Elements of an unsplit node all go "below",
- * to the node's own leaf. */
+ * dropped from a side it does not reach. Elements of an unsplit node all
+ * go "below", to the node's own leaf. */
 inline long KdBuild_large_classify_at(int e, const __global float4 *verts, const __global int *el_tri,
                                       const __global float4 *el_lo, const __global float4 *el_hi,
                                       const __global int *el_node, const __global float *node_split,
@@ -437,9 +437,8 @@ __kernel void KdBuild_large_classify(const __global float4 *verts,
 inline long KdBuild_flag_prefix(int e, int n, const __global long *flags, const __global long *run_scan,
                                 const __global long *total) {
     if (e >= n) return total[0];
-    int start = e - e % KD_RUN;
-    long sum = run_scan[start / KD_RUN];
-    for (int k = start; k < e; ++k) sum += flags[k];
+    long sum = run_scan[e / KD_RUN];
+    for (int k = e - e % KD_RUN; k < e; ++k) sum += flags[k];
     return sum;
 }
 

@@ -9,7 +9,8 @@ a bound and reads its own count on the device):
   ``MAX_CHAIN`` a node in one level: a cut moves no triangle) then a spatial
   median split, triangles clipped to the children (on Intel's CPU runtime
   ``RUN`` elements a work-item, straddlers' corners asked for ahead), counts
-  and compaction by prefix sums; children with at most ``SMALL`` triangles
+  and compaction by prefix sums (of each run's side flags: a node's count is
+  the difference of two); children with at most ``SMALL`` triangles
   become small roots; a larger child becomes a leaf after more than
   ``BAD_SPLITS`` median splits in a row that made no progress for it (it
   kept all its parent's triangles, as around a fan's centre or in a stack,
