@@ -14,6 +14,8 @@ from gpu_core.scene import (
     Camera,
 )
 
+from .inverse import affine_inverse
+
 _FILTER_KINDS = {"BOX": FILTER_BOX, "GAUSSIAN": FILTER_GAUSSIAN, "BLACKMAN_HARRIS": FILTER_BLACKMAN_HARRIS}
 
 
@@ -137,7 +139,7 @@ def view_camera(view_matrix, projection, width: int, height: int, ortho: bool,
     An orthographic view clips from behind its own origin; the camera is
     moved back so that its clipping range starts at zero.
     """
-    matrix = np.linalg.inv(np.asarray(view_matrix, np.float64))
+    matrix = affine_inverse(view_matrix)
     near, far = clip_from_projection(projection, ortho)
     if ortho and near < 0.0:
         back = matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])

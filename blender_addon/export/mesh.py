@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .inverse import cofactors
+
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 
 
@@ -146,10 +148,11 @@ def radial_tangents(local: LocalMesh, matrix, axis: str) -> np.ndarray:
 
 
 def _normal_matrix(lin: np.ndarray) -> tuple[np.ndarray, float]:
-    """The matrix normals turn by (the inverse transpose of ``lin``, itself
-    where it is singular) and ``lin``'s determinant."""
-    det = float(np.linalg.det(lin))
-    return (np.linalg.inv(lin).T if abs(det) > 1e-300 else lin), det
+    """The matrix normals turn by (the inverse transpose of ``lin``: its
+    cofactors over its determinant; itself where it is singular) and
+    ``lin``'s determinant."""
+    cof, det = cofactors(lin)
+    return (cof / det if abs(det) > 1e-300 else lin), det
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:
@@ -161,9 +164,10 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
 
 
 def _times(rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """``rows @ matrix`` for vectors along the last axis of any shape, as
-    one product of a tall matrix (stacked 3 x 3 products are far slower)."""
-    return (rows.reshape(-1, rows.shape[-1]) @ matrix).reshape(rows.shape[:-1] + (matrix.shape[1],))
+    """``rows @ matrix`` for vectors along the last axis of any shape, in
+    einsum's own loops: not ``@``, whose tall products go to OpenBLAS's
+    threads (inverse.py)."""
+    return np.einsum("...j,jk->...k", rows, matrix)
 
 
 def transform(local: LocalMesh, matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:

@@ -1,11 +1,15 @@
 """Depsgraph export: meshes, instances, normals, UVs, materials, lights, world, camera."""
 
 import math
+import os
+import threading
+import time
 
 import numpy as np
 import pytest
 
 from blender_addon.export import ExportError, export_scene
+from blender_addon.export.inverse import affine_inverse, cofactors
 from blender_addon.export.mesh import _times, _unit_rows
 from blender_addon.final import LAST_RUN
 from conftest import render_to_array
@@ -479,6 +483,48 @@ def test_unit_rows_and_row_products_agree_with_numpys_row_by_row_forms():
     matrix = rng.normal(size=(3, 3))
     np.testing.assert_allclose(_times(v, matrix), v @ matrix, rtol=1e-13, atol=1e-15)
     assert _times(v[0], matrix).shape == (3, 3)
+
+
+def test_cofactors_and_affine_inverse_agree_with_numpys_inverse():
+    rng = np.random.default_rng(5)
+    for m in [rng.normal(size=(3, 3)) for _ in range(50)] + [np.diag([2.0, -3.0, 0.5]), np.eye(3) * 1e-6]:
+        cof, det = cofactors(m)
+        assert det == pytest.approx(np.linalg.det(m), rel=1e-12)
+        np.testing.assert_allclose(cof / det, np.linalg.inv(m).T, rtol=1e-9, atol=1e-12)
+        affine = np.eye(4)
+        affine[:3, :3], affine[:3, 3] = m, rng.normal(size=3) * 100.0
+        np.testing.assert_allclose(affine_inverse(affine) @ affine, np.eye(4), atol=1e-9)
+    singular = np.eye(4)
+    singular[2, :3] = singular[0, :3]
+    with pytest.raises(np.linalg.LinAlgError):
+        affine_inverse(singular)
+
+
+def _other_threads_cpu_ms() -> int:
+    """CPU time of this process's threads but the main one, in ms (clock ticks of 10 ms)."""
+    main, ticks = threading.main_thread().native_id, 0
+    for tid in os.listdir("/proc/self/task"):
+        if int(tid) != main:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            ticks += int(fields[11]) + int(fields[12])
+    return 10 * ticks
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="threads' CPU times are read from /proc")
+def test_exporting_a_transformed_mesh_leaves_numpys_blas_threads_idle(bpy):
+    # numpy's OpenBLAS solves even a 3 x 3 inverse, and multiplies tall
+    # products, on its worker threads, which then spin for about 0.1 s and
+    # take a core from the render's first kernels: the export calls neither
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128)  # 65k triangles: a tall product
+    obj = bpy.context.object
+    obj.rotation_euler, obj.scale = (0.3, 0.2, 0.1), (1.0, 2.0, 3.0)
+    _export(bpy)
+    time.sleep(0.3)
+    before = _other_threads_cpu_ms()
+    _export(bpy)
+    time.sleep(0.3)  # a woken worker spins through this
+    assert _other_threads_cpu_ms() - before < 40
 
 
 def test_non_uniform_and_mirroring_scales_keep_normals_on_the_winding_side(bpy):
