@@ -500,15 +500,19 @@ def test_cofactors_and_affine_inverse_agree_with_numpys_inverse():
         affine_inverse(singular)
 
 
-def _other_threads_cpu_ms() -> int:
-    """CPU time of this process's threads but the main one, in ms (clock ticks of 10 ms)."""
-    main, ticks = threading.main_thread().native_id, 0
+def _other_threads_cpu_ms() -> float:
+    """CPU time (user and system) of this process's threads but the calling one, in ms."""
+    me, ticks = threading.get_native_id(), 0
     for tid in os.listdir("/proc/self/task"):
-        if int(tid) != main:
+        if int(tid) == me:
+            continue
+        try:
             with open(f"/proc/self/task/{tid}/stat") as f:
                 fields = f.read().rsplit(")", 1)[1].split()
-            ticks += int(fields[11]) + int(fields[12])
-    return 10 * ticks
+        except FileNotFoundError:  # the thread has ended
+            continue
+        ticks += int(fields[11]) + int(fields[12])
+    return 1000.0 * ticks / os.sysconf("SC_CLK_TCK")
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="threads' CPU times are read from /proc")
