@@ -24,8 +24,15 @@ Each preset's line says whether it is on the Pareto front of time against
 display error (no other configuration both faster and closer), and the
 target line whether GI reaches Cycles' 64-sample error faster.
 
+With ``--mnee`` Cycles (its reference and every Cycles row) is set up as
+for refractive caustics: manifold next-event estimation, each smooth-shaded
+mesh of refractive materials a caustic caster, every other mesh a receiver,
+every light a caustic light. A path tracer alone finds light that reaches
+a diffuse surface through glass from a small light only when a path hits
+the light by chance (the caustics scene); MNEE finds those paths directly.
+
     python bench/tradeoff.py [--scenes cornell_box box_torus caustics]
-        [--size 64] [--reference-samples 4096] [--repeats 3] [--quick] [--tag NAME]
+        [--size 64] [--reference-samples 4096] [--repeats 3] [--mnee] [--quick] [--tag NAME]
 """
 
 from __future__ import annotations
@@ -85,22 +92,44 @@ def errors(image: np.ndarray, reference: np.ndarray) -> dict:
                 linear=relative_rmse(image, reference))
 
 
-def cycles_settings(scene, samples: int, denoise: bool, adaptive: bool = False) -> None:
+def cycles_settings(scene, samples: int, denoise: bool, adaptive: bool = False, mnee: bool = False) -> None:
     cycles_reference_settings(scene, scene.render.resolution_x, samples, box_filter=True)
     scene.cycles.use_denoising = denoise
     if adaptive:
         scene.cycles.use_adaptive_sampling = True
         scene.cycles.adaptive_threshold, scene.cycles.adaptive_min_samples = CYCLES_THRESHOLD, samples // 4
+    if mnee:
+        caustic_casters(scene)
 
 
-def reference(bpy, name: str, size: int, samples: int) -> np.ndarray:
+def _refractive(material) -> bool:
+    """Whether a material's node tree has a glass, refraction or transmitting Principled BSDF."""
+    nodes = material.node_tree.nodes if material is not None and material.node_tree else []
+    return any(n.type in ("BSDF_GLASS", "BSDF_REFRACTION") or
+               (n.type == "BSDF_PRINCIPLED" and n.inputs["Transmission Weight"].default_value > 0.0) for n in nodes)
+
+
+def caustic_casters(scene) -> None:
+    """Cycles' manifold next-event estimation on: smooth refractive meshes
+    cast caustics, the other meshes receive them, every light casts them."""
+    for obj in scene.objects:
+        if obj.type == "MESH":
+            mesh = obj.data
+            caster = (any(_refractive(m) for m in mesh.materials) and len(mesh.polygons) > 0
+                      and all(p.use_smooth for p in mesh.polygons))
+            obj.cycles.is_caustics_caster, obj.cycles.is_caustics_receiver = caster, not caster
+        elif obj.type == "LIGHT":
+            obj.data.cycles.is_caustics_light = True
+
+
+def reference(bpy, name: str, size: int, samples: int, mnee: bool = False) -> np.ndarray:
     """The scene rendered by Cycles at ``samples`` samples with a 1-pixel box
     filter, cached (the tests' stored references have Blender's default film)."""
-    path = os.path.join(RESULTS, f"reference_{name}_{size}_{samples}.npy")
+    path = os.path.join(RESULTS, f"reference_{name}_{size}_{samples}{'_mnee' if mnee else ''}.npy")
     if os.path.exists(path):
         return np.load(path)
     scene = open_scene(bpy, name, size)
-    cycles_settings(scene, samples, False)
+    cycles_settings(scene, samples, False, mnee=mnee)
     image, seconds = render(bpy, scene, "CYCLES")
     print(f"  reference: Cycles {samples} samples in {seconds:.1f} s")
     os.makedirs(RESULTS, exist_ok=True)
@@ -131,7 +160,7 @@ def ours(preset: str, denoise: bool = False, **knobs):
 
 
 def run_scene(bpy, name: str, args) -> list[dict]:
-    ref = reference(bpy, name, args.size, args.reference_samples)
+    ref = reference(bpy, name, args.size, args.reference_samples, args.mnee)
     rows = []
     # a first render builds and caches the kernels; it is not timed
     timed(bpy, name, args.size, "GPUGI", ours("DRAFT"), 1)
@@ -139,13 +168,14 @@ def run_scene(bpy, name: str, args) -> list[dict]:
         for denoise in (False, True):
             repeats = args.repeats if samples <= 64 else 1
             image, seconds = timed(bpy, name, args.size, "CYCLES",
-                                   lambda s: cycles_settings(s, samples, denoise), repeats)
+                                   lambda s: cycles_settings(s, samples, denoise, mnee=args.mnee), repeats)
             rows.append(dict(scene=name, engine="Cycles" + (" denoised" if denoise else ""),
                              config=f"{samples} spp", seconds=seconds, **errors(image, ref)))
     for samples in CYCLES_ADAPTIVE:
         for denoise in (False, True):
             image, seconds = timed(bpy, name, args.size, "CYCLES",
-                                   lambda s: cycles_settings(s, samples, denoise, adaptive=True), args.repeats)
+                                   lambda s: cycles_settings(s, samples, denoise, adaptive=True, mnee=args.mnee),
+                                   args.repeats)
             rows.append(dict(scene=name, engine="Cycles adaptive" + (" denoised" if denoise else ""),
                              config=f"{samples} spp", seconds=seconds, **errors(image, ref)))
     for denoise in (False, True):
@@ -219,14 +249,15 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--reference-samples", type=int, default=4096)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--mnee", action="store_true", help="Cycles with manifold next-event estimation (caustics)")
     parser.add_argument("--quick", action="store_true", help="64 px, one repeat")
     parser.add_argument("--tag", default="", help="suffix of the result files, so a run of other scenes keeps them")
     args = parser.parse_args()
     if args.quick:
         args.size, args.repeats = 64, 1
     bpy = load_bpy()
-    lines = [f"machine: {describe()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp; "
-             f"median of {args.repeats} renders (1 above 64 spp)"]
+    lines = [f"machine: {describe()}; {args.size}x{args.size} px; reference Cycles {args.reference_samples} spp"
+             f"{' with MNEE (and every Cycles row)' if args.mnee else ''}; median of {args.repeats} renders (1 above 64 spp)"]
     print(lines[0], flush=True)
     rows = []
     for name in args.scenes:
