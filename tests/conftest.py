@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -92,3 +93,19 @@ def render_multilayer(bpy, scene, engine: str, path) -> dict[str, np.ndarray]:
 def pass_rgb(channels: dict, name: str) -> np.ndarray:
     """A colour pass of a multilayer render as (H, W, 3) float64."""
     return np.stack([channels[f"ViewLayer.{name}.{c}"] for c in "RGB"], axis=-1).astype(np.float64)
+
+
+def other_threads_cpu_ms() -> float:
+    """CPU time (user and system) of this process's threads but the calling
+    one, in ms: what a library's worker threads spent beside the caller."""
+    me, ticks = threading.get_native_id(), 0
+    for tid in os.listdir("/proc/self/task"):
+        if int(tid) == me:
+            continue
+        try:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except FileNotFoundError:  # the thread has ended
+            continue
+        ticks += int(fields[11]) + int(fields[12])
+    return 1000.0 * ticks / os.sysconf("SC_CLK_TCK")

@@ -389,8 +389,11 @@ def texture_channel(pixels: np.ndarray, channel: int) -> np.ndarray:
     """The values a value socket reads from (H, W, 4) linear pixels: one
     channel, or the colour's luminance (TEXTURE_LUMINANCE, Rec. 709
     weights as Blender's colour-to-value conversion)."""
-    if channel == TEXTURE_LUMINANCE:
-        return pixels[..., :3] @ np.array(LUMINANCE_WEIGHTS, np.float32)
+    if channel == TEXTURE_LUMINANCE:  # the weighted sum written out: ``@`` on a texture over
+        # 3,072 texels wide goes to OpenBLAS's threads, which then spin beside
+        # the kernels (README, "numpy's BLAS threads and the first kernels")
+        r, g, b = (np.float32(w) for w in LUMINANCE_WEIGHTS)
+        return pixels[..., 0] * r + pixels[..., 1] * g + pixels[..., 2] * b
     return pixels[..., min(max(channel, 0), 3)]
 
 

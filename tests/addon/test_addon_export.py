@@ -2,7 +2,6 @@
 
 import math
 import os
-import threading
 import time
 
 import numpy as np
@@ -12,7 +11,7 @@ from blender_addon.export import ExportError, export_scene
 from blender_addon.export.inverse import affine_inverse, cofactors
 from blender_addon.export.mesh import _times, _unit_rows
 from blender_addon.final import LAST_RUN
-from conftest import render_to_array
+from conftest import other_threads_cpu_ms, render_to_array
 from gpu_core.scene import (AREA_ELLIPSE, AREA_RECTANGLE, CAMERA_ORTHO, LIGHT_AREA, LIGHT_POINT, LIGHT_SPOT, LIGHT_SUN,
                             TEXTURE_LUMINANCE, Materials)
 
@@ -500,21 +499,6 @@ def test_cofactors_and_affine_inverse_agree_with_numpys_inverse():
         affine_inverse(singular)
 
 
-def _other_threads_cpu_ms() -> float:
-    """CPU time (user and system) of this process's threads but the calling one, in ms."""
-    me, ticks = threading.get_native_id(), 0
-    for tid in os.listdir("/proc/self/task"):
-        if int(tid) == me:
-            continue
-        try:
-            with open(f"/proc/self/task/{tid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except FileNotFoundError:  # the thread has ended
-            continue
-        ticks += int(fields[11]) + int(fields[12])
-    return 1000.0 * ticks / os.sysconf("SC_CLK_TCK")
-
-
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="threads' CPU times are read from /proc")
 def test_exporting_a_transformed_mesh_leaves_numpys_blas_threads_idle(bpy):
     # numpy's OpenBLAS solves even a 3 x 3 inverse, and multiplies tall
@@ -525,10 +509,10 @@ def test_exporting_a_transformed_mesh_leaves_numpys_blas_threads_idle(bpy):
     obj.rotation_euler, obj.scale = (0.3, 0.2, 0.1), (1.0, 2.0, 3.0)
     _export(bpy)
     time.sleep(0.3)
-    before = _other_threads_cpu_ms()
+    before = other_threads_cpu_ms()
     _export(bpy)
     time.sleep(0.3)  # a woken worker spins through this
-    assert _other_threads_cpu_ms() - before < 40
+    assert other_threads_cpu_ms() - before < 40
 
 
 def test_non_uniform_and_mirroring_scales_keep_normals_on_the_winding_side(bpy):
