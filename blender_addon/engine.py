@@ -15,7 +15,7 @@ from .export.sync import SceneSync, read_updates
 from .final import render_final
 from .opencl_devices import survey
 from .passes import enabled_passes
-from .viewport import ViewportSession, view_state, view_update_session
+from .viewport import ViewportSession, view_state, view_update_session, warm_edit_kernels
 
 
 class GpuGiRenderEngine(bpy.types.RenderEngine):
@@ -58,7 +58,7 @@ class GpuGiRenderEngine(bpy.types.RenderEngine):
         thread, render in the worker."""
         try:
             if self._viewport is None:
-                self._viewport = ViewportSession(self.tag_redraw)
+                self._viewport = ViewportSession(self.tag_redraw, warm_up=warm_edit_kernels)
             if survey().problem:
                 raise DeviceError(survey().problem)
             first = self._sync is None

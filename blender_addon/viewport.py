@@ -14,7 +14,9 @@ kernel into the renderer's film, which each continues (numbered by
 Viewport Noise Threshold the pixels whose noise has settled below it sit
 the later passes out (adaptive sampling, as Cycles' viewport does), and
 the view is done once every pixel has. An edit names the parts it
-changed, which the renderer alone uploads and invalidates. Nothing here
+changed, which the renderer alone uploads and invalidates. Once a view
+has settled, the engine's session compiles on the idle worker the kernels
+that edits launch and the open did not (``warm_edit_kernels``). Nothing here
 touches Blender data: the engine passes exported scenes, cameras and
 settings in.
 """
@@ -158,6 +160,52 @@ def pass_settings(settings, step: Pass):
     return settings
 
 
+def render_pass(renderer, job: Job, step: Pass, edits, should_stop, progress=None):
+    """Render one pass of ``job`` (its scene at the pass's resolution, its
+    settings for the pass) with ``renderer``."""
+    scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, step.factor))
+    return renderer.render(scene, pass_settings(job.settings, step), progress=progress, should_stop=should_stop,
+                           edits=edits, sample_start=step.start, accumulate=not step.coarse)
+
+
+# device specs whose edit kernels this process has compiled (warm_edit_kernels)
+_EDITS_WARMED: set = set()
+
+
+def warm_edit_kernels(job: Job, should_stop: Callable[[], bool]) -> list[list[str]]:
+    """Compile the kernels the viewport's edits launch and an open does
+    not (a turned view's cache records reused, a light's photon maps
+    reweighted, a moved object's overlay kd-tree): the viewport's passes
+    over a small copy of ``job``'s scene and its edits
+    (gpu_core/warmup.py), with a renderer of their own on the job's device,
+    once per process and device. PoCL compiles each kernel at its first
+    launch, so without this the first move after an install waited for
+    compiles (README, the first edits after an install). Stops when
+    ``should_stop()`` says so (an edit came), to go on at the next settled
+    view; any failure is left to the edit that would meet it. The stages
+    each edit's first pass ran."""
+    from gpu_core import warmup
+
+    if job.device_spec in _EDITS_WARMED:
+        return []
+    plans = []
+    try:
+        renderer = default_renderer(job.device_spec)
+        scene, settings = warmup.small_copy(job.scene, job.settings)
+        for edited, edits in [(scene, None)] + warmup.edited_copies(scene):
+            small = Job(edited, settings, job.device_spec, edits=edits)
+            for index, step in enumerate(passes(small)):
+                if should_stop():
+                    return plans
+                result = render_pass(renderer, small, step, edits if index == 0 else set(), should_stop)
+                if index == 0:
+                    plans.append(list(result.stats.get("plan", [])))
+    except Exception:  # stopped (RenderCancelled), or failed: never the viewport's error; the edit reports its own
+        return plans
+    _EDITS_WARMED.add(job.device_spec)
+    return plans
+
+
 class Accumulation:
     """The full-resolution image of one view: the renderer's film after
     each full pass (the mean of every sample so far), denoised once the
@@ -200,12 +248,16 @@ class ViewportSession:
     """One viewport's worker thread and latest image.
 
     ``redraw`` is called (from the worker) whenever a new image or error is
-    ready; ``make_renderer(device_spec)`` builds the renderer the worker uses.
+    ready; ``make_renderer(device_spec)`` builds the renderer the worker uses;
+    ``warm_up(job, should_stop)`` (the engine's: ``warm_edit_kernels``), when
+    given, runs on the worker after a view has settled, until an edit comes.
     """
 
-    def __init__(self, redraw: Callable[[], None], make_renderer=default_renderer):
+    def __init__(self, redraw: Callable[[], None], make_renderer=default_renderer, warm_up=None):
         self._redraw = redraw
         self._make_renderer = make_renderer
+        self._warm_up = warm_up  # run on the idle worker once a view has settled: warm_up(job, should_stop)
+        self.warming = False  # the warm-up is running
         self._renderers: dict = {}
         self._pending: dict = {}  # device spec -> parts edited since its renderer last rendered (None: unknown)
         self._lock = threading.Lock()  # the latest image
@@ -310,30 +362,39 @@ class ViewportSession:
                     return
                 (job, stop), self._queued = self._queued, None
                 self._running = True
+            settled = False
             try:
-                self._work(job, stop)
+                settled = self._work(job, stop)
             finally:
                 with self._wake:
                     self._running = False
+                    self.warming = settled and self._warm_up is not None
+            if self.warming:
+                try:
+                    self._warm_up(job, self._waited_for)
+                finally:
+                    self.warming = False
 
-    def _work(self, job: Job, stop: threading.Event) -> None:
+    def _waited_for(self) -> bool:
+        """A job is queued or the session is closing (what stops a warm-up)."""
+        with self._wake:
+            return self._queued is not None or self._closed
+
+    def _work(self, job: Job, stop: threading.Event) -> bool:
+        """Render ``job``'s passes; True when its view settled (not stopped, no error)."""
         try:
             renderer = self._renderer(job.device_spec)
             film = Accumulation(job.settings.samples, job.settings.denoise, job.settings.denoise_quality)
             for step in passes(job):
                 if stop.is_set():
-                    return
-                scene = dataclasses.replace(job.scene, camera=scaled_camera(job.scene.camera, step.factor))
-                settings = pass_settings(job.settings, step)
+                    return False
                 with self._wake:
                     if stop.is_set():
-                        return  # the edits pending stay for the next job
+                        return False  # the edits pending stay for the next job
                     edits, self._pending[job.device_spec] = self._pending.get(job.device_spec), set()
-                result = renderer.render(scene, settings, progress=self._progress(step, film, stop),
-                                         should_stop=stop.is_set, edits=edits, sample_start=step.start,
-                                         accumulate=not step.coarse)
+                result = render_pass(renderer, job, step, edits, stop.is_set, self._progress(step, film, stop))
                 if stop.is_set():
-                    return
+                    return False
                 image, label = film.add(step, result)
                 with self._lock:
                     self._image = image
@@ -343,13 +404,14 @@ class ViewportSession:
                 self.status = status_line(result, label)
                 self._notify()
                 if film.done:
-                    return
+                    return True
         except RenderCancelled:
-            return
+            return False
         except GpuGiError as err:
             self._fail(str(err))
         except Exception as err:  # a worker must never take Blender down
             self._fail(f"internal error ({type(err).__name__}): {err}")
+        return False
 
     def _progress(self, step: Pass, film: "Accumulation", stop: threading.Event):
         """The renderer's progress as the status line ("gathering", "sample 3/32:

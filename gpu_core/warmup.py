@@ -59,6 +59,39 @@ def small_copy(scene: Scene, settings: RenderSettings) -> tuple[Scene, RenderSet
     return replace(scene, camera=camera), replace(settings, **SMALL)
 
 
+# an edit's share of the triangles moved (an overlay tree holds them: accel/kdtree_overlay.py OVERLAY_SHARE)
+MOVED_SHARE = 1 / 16
+EDIT_TURN = np.radians(2.0)  # the view's turn about its own vertical axis
+
+
+def edited_copies(scene: Scene) -> list[tuple[Scene, set[str]]]:
+    """``scene`` edited as the viewport edits a scene, each edit applied to
+    the one before, with the parts it changes: the view turned, the lights'
+    power raised (where there are lights), the materials' colours changed,
+    and a sixteenth of the triangles moved a little toward the centre of
+    the scene's box (within it, so the device frame stays)."""
+    edits = []
+    turn = np.eye(4)
+    c, s = np.cos(EDIT_TURN), np.sin(EDIT_TURN)
+    turn[[0, 0, 2, 2], [0, 2, 0, 2]] = (c, s, -s, c)
+    scene = replace(scene, camera=replace(scene.camera, matrix=np.asarray(scene.camera.matrix) @ turn))
+    edits.append((scene, set()))
+    if len(scene.lights.power):
+        scene = replace(scene, lights=replace(scene.lights, power=np.asarray(scene.lights.power) * np.float32(1.5)))
+        edits.append((scene, {"lights"}))
+    if len(scene.materials.base_color):
+        colours = np.asarray(scene.materials.base_color) * np.float32(0.9)
+        scene = replace(scene, materials=replace(scene.materials, base_color=colours))
+        edits.append((scene, {"materials"}))
+    if scene.triangle_count:
+        lo, hi = scene.bounds()
+        rows = max(1, int(scene.triangle_count * MOVED_SHARE))
+        triangles = np.array(scene.triangles, copy=True)
+        triangles[:rows] += 1e-3 * (0.5 * (lo + hi) - triangles[:rows])
+        edits.append((replace(scene, triangles=triangles), {"geometry"}))
+    return edits
+
+
 def start(device: Device, scene: Scene, settings: RenderSettings, programs: list) -> subprocess.Popen | None:
     """The helper process warming the kernels of a render of ``scene`` with
     ``settings`` (whose ``programs`` the plan lists), where it helps: a

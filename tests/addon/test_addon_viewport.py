@@ -16,6 +16,7 @@ from blender_addon.display import DISPLAY_MAX, prepare_pixels
 from blender_addon.engine import GpuGiRenderEngine
 from blender_addon.viewport import (BATCH_SECONDS, COARSE_FACTOR, OPEN_MIN_SAMPLES, Job, ViewportSession, pass_settings,
                                    passes, view_state)
+from gpu_core.device import get_device
 from gpu_core.scene import FILTER_BLACKMAN_HARRIS, FILTER_BOX
 from gpu_core.errors import DeviceError, RenderCancelled
 from gpu_core.scene import CAMERA_ORTHO, CAMERA_PERSP, Lights
@@ -62,6 +63,9 @@ void main() { color = texture(image, uv); }
 
 def test_prepared_pixels_draw_unchanged_on_a_float_framebuffer():
     moderngl = pytest.importorskip("moderngl")
+    # Mesa's EGL driver loads its own LLVM (15): a process that loads it before
+    # PoCL's aborts at its first OpenCL build, so the OpenCL device comes first
+    get_device(None)
     ctx = moderngl.create_standalone_context(backend="egl")
     try:
         width, height = 24, 16
@@ -414,6 +418,73 @@ def test_one_worker_thread_serves_every_edit_of_a_session():
     worker = session._thread
     session.stop()
     assert not worker.is_alive()
+
+
+# -- the edit kernels' warm-up on the idle worker ---------------------------------------
+
+
+class FakeWarmUp:
+    """Records each warm-up; ``block`` makes the first wait until told to stop."""
+
+    def __init__(self, block=False):
+        self.jobs: list = []
+        self.stopped: list[bool] = []
+        self.block = block
+        self.started = threading.Event()
+
+    def __call__(self, job, should_stop):
+        self.jobs.append(job)
+        self.started.set()
+        deadline = time.time() + 10
+        while self.block and not should_stop() and time.time() < deadline:
+            time.sleep(0.005)
+        self.block = False
+        self.stopped.append(should_stop())
+
+
+def _warming_session(renderer, warm_up):
+    session = ViewportSession(lambda: None, make_renderer=lambda spec: renderer, warm_up=warm_up)
+    return session
+
+
+def _wait_idle(session):
+    deadline = time.time() + 10
+    while (session.busy or session.warming) and time.time() < deadline:
+        time.sleep(0.005)
+    assert not session.busy and not session.warming
+
+
+def test_a_settled_view_warms_the_edit_kernels_on_the_idle_worker():
+    renderer, warm_up = FakeRenderer(), FakeWarmUp()
+    session = _warming_session(renderer, warm_up)
+    job = _job(samples=4)
+    session.update_scene(job, signature=("view", 1))
+    _wait_idle(session)
+    assert warm_up.jobs == [job] and warm_up.stopped == [False]  # after the last pass, nothing waiting
+    assert len(renderer.calls) == 4
+
+
+def test_a_view_stopped_before_it_settled_does_not_warm_up():
+    renderer, warm_up = FakeRenderer(block=True), FakeWarmUp()
+    session = _warming_session(renderer, warm_up)
+    session.update_scene(_job(width=32), signature=("view", 1))
+    assert renderer.started.wait(5)
+    session.update_scene(_job(width=16, samples=2), signature=("view", 2))
+    renderer.block = False
+    _wait_idle(session)
+    assert [job.scene.camera.width for job in warm_up.jobs] == [16]  # only the view that settled
+
+
+def test_an_edit_stops_the_warm_up_and_renders_at_once():
+    renderer, warm_up = FakeRenderer(), FakeWarmUp(block=True)
+    session = _warming_session(renderer, warm_up)
+    session.update_scene(_job(samples=2), signature=("view", 1))
+    assert warm_up.started.wait(5) and session.warming
+    calls = len(renderer.calls)
+    session.update_scene(_job(samples=2, edits={"lights"}), signature=("view", 2))
+    _wait_idle(session)
+    assert warm_up.stopped == [True, False]  # it saw the queued edit; the edited view warmed up in turn
+    assert renderer.edits[calls] == {"lights"}  # the edit rendered after the first
 
 
 # -- the engine's viewport callbacks, with a stand-in for Blender's engine struct ---------

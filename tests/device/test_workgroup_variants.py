@@ -69,6 +69,59 @@ def test_renders_of_other_sizes_compile_no_kernel_and_no_work_group_variant(tmp_
     assert _compiled_files(tmp_path / "pocl") == files_after_first
 
 
+# a viewport session of a small box with a mirror (every GI stage): "open" opens the view and waits
+# until it has settled and the session's warm-up (given as argv[2]: "warm" or "none") has ended;
+# "edits" then makes the viewport's edits (gpu_core/warmup.py) one after the other, without a warm-up.
+# Prints the programs this process compiled.
+_VIEWPORT = """
+import sys, time
+sys.path[:0] = ["tests", "tests/renderer"]
+from dataclasses import replace
+from test_threads import GI, scene
+from blender_addon.viewport import Job, ViewportSession, warm_edit_kernels
+from gpu_core.device import get_device
+from gpu_core.warmup import edited_copies
+
+box = scene(True, 48)
+settings = replace(GI, samples=4)
+session = ViewportSession(lambda: None, warm_up=warm_edit_kernels if sys.argv[2] == "warm" else None)
+
+def show(job, view):
+    session.update_scene(job, ("view", view))
+    deadline = time.time() + 300
+    while (session.busy or session.warming) and time.time() < deadline:
+        time.sleep(0.01)
+    if session.error or session.busy or session.warming:
+        sys.exit(f"the view did not settle: {session.error}")
+
+show(Job(box, settings, "cpu"), 0)
+if sys.argv[1] == "edits":
+    for view, (edited, edits) in enumerate(edited_copies(box), 1):
+        show(Job(edited, settings, "cpu", edits=edits), view)
+session.stop()
+print("compiled:", sorted(b.name for b in get_device("cpu").builds if not b.from_cache))
+"""
+
+
+def _viewport(tmp_path: Path, mode: str, warm_up: str) -> list[str]:
+    env = dict(os.environ, POCL_CACHE_DIR=str(tmp_path / "pocl"), GPUGI_KERNEL_CACHE=str(tmp_path / "kernels"))
+    env.pop("GPUGI_DEVICE", None)
+    run = subprocess.run([sys.executable, "-c", _VIEWPORT, mode, warm_up], cwd=ROOT, env=env, capture_output=True,
+                         text=True, timeout=900)
+    assert run.returncode == 0, run.stderr
+    return run.stdout.split("compiled:", 1)[1].strip()
+
+
+@pytest.mark.slow
+@counts_pocls_cache
+def test_after_a_settled_views_warm_up_a_later_process_compiles_nothing_for_the_viewports_edits(tmp_path):
+    assert _viewport(tmp_path, "open", "warm") != "[]"  # the caches started empty
+    files = _compiled_files(tmp_path / "pocl")
+    # another process: the open and every edit kind, each work-group function from PoCL's cache
+    assert _viewport(tmp_path, "edits", "none") == "[]"
+    assert _compiled_files(tmp_path / "pocl") == files
+
+
 _WIDE_LAUNCHES = """
 import sys
 import numpy as np

@@ -20,6 +20,7 @@ from gpu_core import warmup
 from gpu_core.device import Device
 from gpu_core.device import programs as programs_module
 from gpu_core.errors import DeviceError
+from gpu_core.scene import Lights
 from gpu_core.plan import plan
 from gpu_core.renderer import Renderer
 from gpu_core.scene.validate import validate
@@ -32,6 +33,48 @@ def test_the_small_copy_needs_the_programs_of_the_render():
     assert (small_scene.camera.width, small_scene.camera.height) == (warmup.SIDE, warmup.SIDE)
     assert small_settings.global_photons < GI.global_photons and not small_settings.denoise
     assert plan(validate(small_scene), small_settings).programs == plan(full, GI).programs
+
+
+def test_the_viewports_edits_of_a_copy_each_change_only_the_parts_they_name():
+    # each edit is applied to the one before; a view change names no part (the camera is compared anyway)
+    from gpu_core.scene.model import PARTS, part_digests
+
+    before = scene(True, 24)
+    copies = warmup.edited_copies(before)
+    assert [edits for _, edits in copies] == [set(), {"lights"}, {"materials"}, {"geometry"}]
+    for edited, edits in copies:
+        old, new = part_digests(before), part_digests(edited)
+        changed = {part for part in PARTS if old[part] != new[part]}
+        assert changed == (edits or {"camera"})
+        before = edited
+    # the moved triangles stay inside the scene's box, so the device frame stays where it was
+    lo, hi = copies[-2][0].bounds()
+    moved_lo, moved_hi = copies[-1][0].bounds()
+    assert (moved_lo >= lo).all() and (moved_hi <= hi).all()
+    moved = np.flatnonzero((copies[-1][0].triangles != copies[-2][0].triangles).any(axis=(1, 2)))
+    assert 1 <= len(moved) <= len(before.triangles) * warmup.MOVED_SHARE + 1
+
+
+def test_a_scene_without_lights_gets_no_light_edit():
+    bare = dataclasses.replace(scene(False, 24), lights=Lights.make([]))
+    assert [edits for _, edits in warmup.edited_copies(bare)] == [set(), {"materials"}, {"geometry"}]
+
+
+def test_warming_up_renders_every_edit_path_once_per_device(monkeypatch):
+    # the viewport's warm-up (blender_addon/viewport.py) walks these copies through the viewport's passes
+    from blender_addon import viewport
+
+    monkeypatch.setattr(viewport, "_EDITS_WARMED", set())
+    job = viewport.Job(scene=scene(True, 24), settings=dataclasses.replace(GI, samples=4), device_spec=None)
+    assert viewport.warm_edit_kernels(job, lambda: True) == []  # told to stop before it began: not done
+    plans = viewport.warm_edit_kernels(job, lambda: False)
+    assert len(plans) == 5  # the open, then the view, light, material and move edits
+    assert "kdtree" in plans[0] and "global_photons" in plans[0]
+    assert "cache_records_reused" in plans[1] and "global_photons_reused" in plans[1]
+    assert "global_photons_reweighted" in plans[2]
+    assert "sample_points_reused" in plans[3]
+    assert "kdtree_overlay" in plans[4]
+    assert viewport.warm_edit_kernels(job, lambda: False) == []  # done for this device in this process
 
 
 class _Recorder:
