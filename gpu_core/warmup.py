@@ -20,6 +20,11 @@ against 19.7-21.1 s with the helper walking the stages as the render
 does). The helper changes nothing the render computes; a helper that
 fails costs nothing but its core.
 
+The viewport warms the kernels only its edits launch the same way, on
+its idle worker once a view has settled: its passes over the small copy
+and over ``edited_copies`` of it (blender_addon/viewport.py
+``warm_edit_kernels``).
+
     python -m gpu_core.warmup P:D < pickle of (scene, settings)
 """
 
