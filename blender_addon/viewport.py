@@ -326,12 +326,15 @@ class ViewportSession:
             self._thread.start()
 
     def stop(self) -> None:
-        """Stop the running job after its current batch and end the worker."""
+        """Stop the running job after its current batch and end the worker;
+        a warm-up ends at its next stage without Blender's thread waiting
+        for it (the stage may be a program's compile; it holds nothing of
+        the session's)."""
         with self._wake:
             self._stop.set()
             self._queued, self._closed = None, True
             self._wake.notify()
-        if self._thread is not None:
+        if self._thread is not None and not self.warming:
             self._thread.join(timeout=10.0)
         self._thread = None
         # the view's renderers go, and their device memory back to the drivers

@@ -475,6 +475,28 @@ def test_a_view_stopped_before_it_settled_does_not_warm_up():
     assert [job.scene.camera.width for job in warm_up.jobs] == [16]  # only the view that settled
 
 
+def test_closing_the_view_does_not_wait_for_a_warm_up_stage():
+    # a stage of the warm-up may be a program's compile: Blender's thread must not wait for it
+    release, inside, ended = threading.Event(), threading.Event(), threading.Event()
+
+    def compiling(job, should_stop):
+        inside.set()
+        release.wait(10)
+        ended.set()
+
+    session = _warming_session(FakeRenderer(), compiling)
+    session.update_scene(_job(samples=2), signature=("view", 1))
+    assert inside.wait(5)
+    closing = threading.Thread(target=session.stop)
+    closing.start()
+    closing.join(5)
+    try:
+        assert not closing.is_alive() and not ended.is_set()  # stop returned with the stage still running
+    finally:
+        release.set()
+    assert ended.wait(5)
+
+
 def test_an_edit_stops_the_warm_up_and_renders_at_once():
     renderer, warm_up = FakeRenderer(), FakeWarmUp(block=True)
     session = _warming_session(renderer, warm_up)
