@@ -28,9 +28,22 @@ _ROWS_PER_LAUNCH = 1 << 21  # queries per kNN launch
 _PROGRAM = "accel/point_tree_query.cl"
 
 
+def knn_capacity(k: int) -> int:
+    """The kNN heap's capacity a program is built with for searches of
+    ``k`` points (KNN_K): the next power of two from 16. Searches keep their
+    own k (KNN_VARIABLE_K), so the k of every preset, or of a slider being
+    dragged, finds one of a few programs built already."""
+    return max(16, 1 << (max(int(k), 1) - 1).bit_length())
+
+
+def query_defines(k: int) -> dict:
+    """The query program's defines for searches of ``k`` neighbours."""
+    return {"KNN_K": knn_capacity(k), "KNN_VARIABLE_K": 1}
+
+
 def query_programs(k: int) -> list[tuple[str, dict]]:
     """The query program for searches of ``k`` neighbours (for building it up front)."""
-    return [(_PROGRAM, {"KNN_K": int(k)})]
+    return [(_PROGRAM, query_defines(k))]
 
 
 def _as_points(array, name: str) -> np.ndarray:
@@ -171,7 +184,7 @@ class PointTree:
     # -- queries ------------------------------------------------------------
 
     def _kernel(self, name: str, k: int):
-        return self.device.kernel(_PROGRAM, name, {"KNN_K": k})
+        return self.device.kernel(_PROGRAM, name, query_defines(k))
 
     @staticmethod
     def _max_d2(max_radius) -> np.float32:
@@ -211,7 +224,7 @@ class PointTree:
             n = min(rows, m - s)
             part = q3[s : s + n]
             kernel(n, *self.kernel_args(), dev.to_device(float4_rows(part)),
-                   dev.to_device(_spatial_order(part).astype(np.int32)), max_d2, np.int32(n), out_i, out_d)
+                   dev.to_device(_spatial_order(part).astype(np.int32)), max_d2, np.int32(k), np.int32(n), out_i, out_d)
             dev.to_host(out_i, idx[s : s + n])
             dev.to_host(out_d, d2[s : s + n])
         return idx, d2
@@ -244,7 +257,7 @@ class PointTree:
         order = _spatial_order(pos[:, :3]).astype(np.int32)
         self._kernel("PointTree_density_batch", k)(
             m, *self.kernel_args(), *photon_args, dev.to_device(pos), dev.to_device(nrm), dev.to_device(alb),
-            dev.to_device(order), self._max_d2(max_radius), np.int32(FILTERS[filter]), np.float32(normal_cos),
+            dev.to_device(order), self._max_d2(max_radius), np.int32(k), np.int32(FILTERS[filter]), np.float32(normal_cos),
             np.int32(albedo is not None), np.int32(m), buf)
         dev.to_host(buf, out)
         return out[:, :3]
@@ -264,7 +277,7 @@ class PointTree:
         k = self._check_k(k)
         self._kernel("PointTree_density_batch", k)(
             n, *self.kernel_args(), *self.photon_args(), positions, normals, None, None, self._max_d2(max_radius),
-            np.int32(FILTERS[filter]), np.float32(normal_cos), np.int32(0), np.int32(n), out)
+            np.int32(k), np.int32(FILTERS[filter]), np.float32(normal_cos), np.int32(0), np.int32(n), out)
 
 
 __all__ = ["PointTree", "FILTERS", "KDNODE_DTYPE", "POINT_NODE_DTYPE"]

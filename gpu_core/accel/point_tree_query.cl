@@ -1,5 +1,6 @@
 /* Batch queries on the point kd-tree: k nearest neighbours, and irradiance
- * or Lambertian radiance by density estimation. Built with -D KNN_K=k. */
+ * or Lambertian radiance by density estimation. Built with -D KNN_K=capacity
+ * and KNN_VARIABLE_K: a launch passes its k, at most the capacity. */
 #include "device/launch.h"
 #include "accel/point_tree_knn.h"
 #include "accel/point_density.h"
@@ -8,7 +9,7 @@
  * point indices; rows padded with -1 and INFINITY. Work item i handles
  * query order[i] (a spatially coherent order) and writes that row. */
 __kernel void PointTree_knn_batch(POINT_TREE_PARAMS, const __global float4 *queries,
-                                  const __global int *order, const float max_d2,
+                                  const __global int *order, const float max_d2, const int k,
                                   const int n_queries, __global int *out_id,
                                   __global float *out_d2) {
     int i = Launch_global_id();
@@ -16,11 +17,11 @@ __kernel void PointTree_knn_batch(POINT_TREE_PARAMS, const __global float4 *quer
     int q = order[i];
     PointTree tree = POINT_TREE_MAKE();
     Knn h;
-    PointTree_knn(&tree, queries[q].xyz, KNN_K, max_d2, &h);
-    size_t row = (size_t)q * KNN_K;
+    PointTree_knn(&tree, queries[q].xyz, k, max_d2, &h);
+    size_t row = (size_t)q * k;
     int n = Knn_count(&h);
     Knn_sort(&h);
-    for (int j = 0; j < KNN_K; ++j) {
+    for (int j = 0; j < k; ++j) {
         out_id[row + j] = j < n ? as_int(tree.points[Knn_id(&h, j)].w) : -1;
         out_d2[row + j] = j < n ? Knn_d2(&h, j) : INFINITY;
     }
@@ -33,7 +34,7 @@ __kernel void PointTree_density_batch(POINT_TREE_PARAMS, PHOTON_PARAMS,
                                       const __global float4 *queries,
                                       const __global float4 *normals,
                                       const __global float4 *albedo,
-                                      const __global int *order, const float max_d2,
+                                      const __global int *order, const float max_d2, const int k,
                                       const int filter, const float normal_cos,
                                       const int as_radiance, const int n_queries,
                                       __global float4 *out) {
@@ -42,8 +43,7 @@ __kernel void PointTree_density_batch(POINT_TREE_PARAMS, PHOTON_PARAMS,
     int q = order ? order[i] : i;
     PointTree tree = POINT_TREE_MAKE();
     PhotonData ph = PHOTON_DATA_MAKE();
-    float3 e = Density_irradiance(&tree, &ph, queries[q].xyz, normals[q].xyz, KNN_K, max_d2, filter,
-                                  normal_cos);
+    float3 e = Density_irradiance(&tree, &ph, queries[q].xyz, normals[q].xyz, k, max_d2, filter, normal_cos);
     if (as_radiance) e *= albedo[q].xyz * (1.0f / PI_F);
     out[q] = (float4)(e, 0.0f);
 }

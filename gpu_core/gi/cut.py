@@ -31,7 +31,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pyopencl as cl
 
-from ..accel.point_tree import PointTree
+from ..accel.point_tree import PointTree, knn_capacity
 from ..device import Device, primitives
 from ..device.constants import KD_LEAF as LEAF  # noqa: F401  (the leaf axis, for readers of the nodes)
 from ..device.layout import float4_rows
@@ -61,7 +61,7 @@ _PROGRAM = "gi/cut.cl"
 def lookup_defines(k: int) -> dict:
     """Defines of a program that estimates with ``k`` photons and looks the
     cut up: the kNN capacity and the lookup's constants."""
-    return {"KNN_K": max(int(k), FALLBACK), "KNN_VARIABLE_K": 1, "CUT_NEIGHBOURS": NEIGHBOURS,
+    return {"KNN_K": knn_capacity(max(int(k), FALLBACK)), "KNN_VARIABLE_K": 1, "CUT_NEIGHBOURS": NEIGHBOURS,
             "CUT_FALLBACK": FALLBACK, "CUT_COHERENT": f"{COHERENT!r}f"}
 
 

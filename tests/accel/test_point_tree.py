@@ -6,7 +6,7 @@ import pytest
 
 from layout_probe import host_layout, probe
 from gpu_core.accel import point_tree_build
-from gpu_core.accel.point_tree import PointTree
+from gpu_core.accel.point_tree import PointTree, knn_capacity, query_programs
 
 
 def brute_knn(points, queries, k, max_radius=None):
@@ -59,6 +59,19 @@ def test_knn_matches_brute_force(device, name, build):
     queries = np.concatenate([RNG.random((150, 3)), points[:50]]).astype(np.float32)
     for k in (1, 8, 50):
         check_knn(tree, points, queries, k)
+
+
+def test_searches_of_one_capacity_bucket_share_a_program_and_each_keeps_its_own_k(device):
+    # k 17..32 take one program (a heap of 32), so a preset or a dragged slider compiles nothing new
+    assert [knn_capacity(k) for k in (1, 16, 17, 20, 32, 33, 50, 64, 65, 1024)] == [16, 16, 32, 32, 32, 64, 64, 64,
+                                                                                    128, 1024]
+    assert query_programs(20) == query_programs(32) != query_programs(50)
+    points = CLOUDS["uniform"].astype(np.float32)
+    tree = PointTree.build(device, points)
+    queries = RNG.random((100, 3)).astype(np.float32)
+    for k in (17, 20, 31, 32):  # every k of the bucket, on the one program
+        check_knn(tree, points, queries, k)
+        assert tree.knn(queries, k)[0].shape == (100, k)
 
 
 def test_knn_within_a_radius(device):

@@ -14,7 +14,7 @@ from gpu_core.gi import gather
 from gpu_core.plan import Held, plan
 from gpu_core.renderer import Renderer
 from gpu_core.scene import LIGHT_POINT, PARTS, Lights, Materials, validate
-from gpu_core.settings import RenderSettings
+from gpu_core.settings import RenderSettings, preset
 
 GI = RenderSettings(mode="gi", samples=2, global_photons=20_000, caustic_photons=20_000, photon_k=20,
                     cache_seeds=60, gather_rays=16)
@@ -65,6 +65,15 @@ def test_each_edit_uploads_rebuilds_and_traces_only_what_it_touches(edit, upload
         assert edited.changed == uploads
     assert edited.traces_photons == (photons == "global_photons")
     assert edited.reweights_photons == (photons == "global_photons_reweighted")
+
+
+def test_draft_and_preview_build_the_same_programs_so_switching_between_them_compiles_nothing(device):
+    # their photon k (20, 32) and caustic k (12, 16) fall in the same kNN capacity buckets; Final's 50 does not
+    scene = validate(room(mirror=True))
+    wanted = {name: plan(scene, preset(name, mode="gi").validated(), None, None, device).programs
+              for name in ("draft", "preview", "final")}
+    assert sorted(map(repr, wanted["draft"])) == sorted(map(repr, wanted["preview"]))
+    assert sorted(map(repr, wanted["final"])) != sorted(map(repr, wanted["preview"]))
 
 
 def test_settings_photon_tracing_does_not_read_keep_the_photon_maps():
