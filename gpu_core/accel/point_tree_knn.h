@@ -2,9 +2,10 @@
  * candidates, filled by a depth-first descent that visits the near child
  * first and skips any subtree whose plane distance cannot beat the current
  * k-th distance. KNN_K, a compile-time define, is the heap's capacity (the
- * program is built per capacity) and every search's k; a program that
- * also searches for fewer (KNN_VARIABLE_K: the cut lookup beside photon
- * estimates) keeps k per search, at a small cost. */
+ * program is built per capacity) and every search's k; a program whose
+ * searches ask for fewer (KNN_VARIABLE_K: the photon searches, built per
+ * power-of-two capacity, accel/point_tree.py knn_capacity) keeps k per
+ * search. */
 #ifndef GPUGI_POINT_TREE_KNN_H
 #define GPUGI_POINT_TREE_KNN_H
 #include "accel/point_tree.h"

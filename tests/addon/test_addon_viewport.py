@@ -443,8 +443,7 @@ class FakeWarmUp:
 
 
 def _warming_session(renderer, warm_up):
-    session = ViewportSession(lambda: None, make_renderer=lambda spec: renderer, warm_up=warm_up)
-    return session
+    return ViewportSession(lambda: None, make_renderer=lambda spec: renderer, warm_up=warm_up)
 
 
 def _wait_idle(session):

@@ -103,7 +103,8 @@ print("compiled:", sorted(b.name for b in get_device("cpu").builds if not b.from
 """
 
 
-def _viewport(tmp_path: Path, mode: str, warm_up: str) -> list[str]:
+def _viewport(tmp_path: Path, mode: str, warm_up: str) -> str:
+    """What the session script printed of the programs its process compiled."""
     env = dict(os.environ, POCL_CACHE_DIR=str(tmp_path / "pocl"), GPUGI_KERNEL_CACHE=str(tmp_path / "kernels"))
     env.pop("GPUGI_DEVICE", None)
     run = subprocess.run([sys.executable, "-c", _VIEWPORT, mode, warm_up], cwd=ROOT, env=env, capture_output=True,
