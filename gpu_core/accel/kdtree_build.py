@@ -44,7 +44,6 @@ from ..device import Device, primitives
 from ..device.constants import KD_LEAF as LEAF
 from ..device.constants import KD_MAX_DEPTH as MAX_DEPTH
 from ..device.layout import KDNODE_DTYPE
-from ..device.select import is_pocl
 from ..device.timer import StageTimer
 from ..errors import check_stop
 from . import kdtree_blocks
@@ -118,11 +117,10 @@ class _Config:
         # candidate (the sorted form's private arrays were not measured there)
         self.sorted_masks = device.is_cpu if sorted_masks is None else bool(sorted_masks)
         # a CPU's work-item takes a run of the large stage's elements, and asks
-        # for a straddler's corners ahead of its clipping, where that was
-        # measured to pay (Intel's runtime; not measured on PoCL); one element
-        # a work-item elsewhere
+        # for a straddler's corners ahead of its clipping (measured to pay
+        # through Intel's runtime and PoCL); one element a work-item elsewhere
         if runs is None:
-            runs = device.is_cpu and not is_pocl(device.device)
+            runs = device.is_cpu
         self.run = RUN if runs else 1
         self.prefetch_ahead = PREFETCH_AHEAD if runs else 0
         # the SAH weighs a node step against how its leaves will be tested

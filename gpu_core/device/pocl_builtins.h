@@ -151,6 +151,18 @@ INLINE_OVL float Inline_native_cos(float x) {
     return ((q + 1) & 2) ? -v : v;
 }
 
+/* prefetch, which PoCL's library makes a call that does nothing: a read
+ * prefetch of the first and the last value's cache lines (the kd-tree build
+ * asks ahead for a straddling triangle's corners) */
+#if __has_builtin(__builtin_prefetch)
+INLINE_OVL void Inline_prefetch(const __global float4 *p, size_t n) {
+    __builtin_prefetch(p);
+    __builtin_prefetch(p + n - 1);
+}
+#undef prefetch
+#define prefetch Inline_prefetch
+#endif
+
 #undef popcount
 #define popcount Inline_popcount
 #undef isnan

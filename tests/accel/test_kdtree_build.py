@@ -449,6 +449,17 @@ def test_element_runs_make_the_same_tree_as_one_element_a_work_item(device, name
     assert_same_tree(in_runs, one_each)
 
 
+def test_a_cpu_device_builds_in_runs_asking_ahead_for_straddlers_corners(device):
+    """Every CPU device (PoCL as well as Intel's runtime: measured to pay on
+    both) takes the large stage's elements in runs and asks ahead for a
+    straddler's corners; other devices one element a work-item."""
+    defines = kdtree_build.programs(device)[0][1]
+    if device.is_cpu:
+        assert (defines["KD_RUN"], defines["KD_PREFETCH_AHEAD"]) == (kdtree_build.RUN, kdtree_build.PREFETCH_AHEAD)
+    else:
+        assert (defines["KD_RUN"], defines["KD_PREFETCH_AHEAD"]) == (1, 0)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_candidate_masks_from_sorted_bounds_match_each_candidate_against_every_element(device, seed):
     """The two mask kernels side by side, mask for mask, on small roots of 1
