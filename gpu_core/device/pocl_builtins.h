@@ -77,6 +77,26 @@ INLINE_OVL float4 Inline_select(float4 a, float4 b, int4 c) {
     return as_float4((as_int4(b) & take_b) | (as_int4(a) & ~take_b));
 }
 
+/* min, max and abs of integers (abs an unsigned result, as the
+ * specification's), clz, floor, and isless of a float4 (each lane -1 where
+ * a < b, 0 else, NaN lanes 0): compares and the compiler's own builtins */
+INLINE_OVL int Inline_min(int a, int b) { return a < b ? a : b; }
+INLINE_OVL uint Inline_min(uint a, uint b) { return a < b ? a : b; }
+INLINE_OVL int3 Inline_min(int3 a, int3 b) { return __builtin_elementwise_min(a, b); }
+INLINE_OVL int Inline_max(int a, int b) { return a > b ? a : b; }
+INLINE_OVL uint Inline_max(uint a, uint b) { return a > b ? a : b; }
+INLINE_OVL int3 Inline_max(int3 a, int3 b) { return __builtin_elementwise_max(a, b); }
+INLINE_OVL int4 Inline_max(int4 a, int4 b) { return __builtin_elementwise_max(a, b); }
+INLINE_OVL uint Inline_abs(int a) { return a < 0 ? 0u - (uint)a : (uint)a; }
+INLINE_OVL int Inline_clz(int x) { return x ? __builtin_clz((uint)x) : 32; }
+INLINE_OVL uint Inline_clz(uint x) { return x ? (uint)__builtin_clz(x) : 32u; }
+INLINE_OVL float Inline_floor(float a) { return __builtin_floorf(a); }
+INLINE_OVL float2 Inline_floor(float2 a) { return (float2)(__builtin_floorf(a.x), __builtin_floorf(a.y)); }
+INLINE_OVL float3 Inline_floor(float3 a) {
+    return (float3)(__builtin_floorf(a.x), __builtin_floorf(a.y), __builtin_floorf(a.z));
+}
+INLINE_OVL int4 Inline_isless(float4 a, float4 b) { return a < b; }
+
 /* dot and cross */
 INLINE_OVL float Inline_dot(float2 a, float2 b) { return a.x * b.x + a.y * b.y; }
 INLINE_OVL float Inline_dot(float3 a, float3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
@@ -187,6 +207,18 @@ INLINE_OVL void Inline_prefetch(const __global float4 *p, size_t n) {
 #define any Inline_any
 #undef select
 #define select Inline_select
+#undef min
+#define min Inline_min
+#undef max
+#define max Inline_max
+#undef abs
+#define abs Inline_abs
+#undef clz
+#define clz Inline_clz
+#undef floor
+#define floor Inline_floor
+#undef isless
+#define isless Inline_isless
 #undef dot
 #define dot Inline_dot
 #undef cross

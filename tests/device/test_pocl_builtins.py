@@ -1,5 +1,5 @@
 """The inlined math builtins (device/pocl_builtins.h, put before every
-program on PoCL; any and select among them) give the builtins' results: the same kernel built with
+program on PoCL; any, select and the integer ones among them) give the builtins' results: the same kernel built with
 them and built plainly by the driver agree, at NaN operands, signed zeros,
 infinities, and at vectors so tiny or huge their squares under- or overflow."""
 
@@ -35,13 +35,26 @@ __kernel void Builtins_probe(const __global float4 *a, const __global float4 *b,
     o[12] = select(x, y, m);
     o[13] = (float4)((float)any(m), (float)any(m & (int4)(0x7fffffff)), (float)any(as_int(x.x)),
                      select(x.y, y.y, as_int(x.z)));
+    int i0 = as_int(x.x), i1 = as_int(y.y);  /* integers of every sign and size, 0 and INT_MIN among them */
+    uint u0 = as_uint(x.y), u1 = as_uint(y.x);
+    int3 i3 = as_int3(x.xyz), j3 = as_int3(y.xyz);
+    o[14] = as_float4((int4)(min(i0, i1), max(i0, i1), (int)abs(i0), clz(i0)));
+    o[15] = as_float4((uint4)(min(u0, u1), max(u0, u1), clz(u0), abs(i1)));
+    o[16] = as_float4((int4)(min(i3, j3), 0));
+    o[17] = as_float4((int4)(max(i3, j3), 0));
+    o[18] = as_float4(max(as_int4(x), as_int4(y)));
+    o[19] = as_float4(isless(x, y));
+    o[20] = (float4)(floor(x.x), floor(x.yz), 0.0f);
+    o[21] = (float4)(floor(u), 0.0f);
 }
 """
-OUTPUTS = 14
+OUTPUTS = 22
 # outputs computed exactly alike (selections, exact operations); the rest may round differently
 _EXACT = [(0, slice(0, 4)), (1, slice(0, 3)), (2, slice(0, 3)), (3, slice(0, 3)), (4, slice(0, 4)), (5, slice(0, 3)),
           (7, slice(3, 4)), (8, slice(0, 3)), (9, slice(3, 4)), (10, slice(0, 4)), (11, slice(0, 2)),
-          (12, slice(0, 4)), (13, slice(0, 4))]
+          (12, slice(0, 4)), (13, slice(0, 4)), (20, slice(0, 4)), (21, slice(0, 4))]
+# integer outputs, compared bit for bit
+_BITS = range(14, 20)
 
 
 def _rows():
@@ -80,6 +93,9 @@ def test_inlined_builtins_give_the_builtins_results(device, probe_program):
     reference = _run(device, plain, a, b)
     for row, cols in _EXACT:
         np.testing.assert_array_equal(ours[:, row, cols], reference[:, row, cols], err_msg=f"output {row}")
+    for row in _BITS:
+        np.testing.assert_array_equal(ours[:, row].view(np.int32), reference[:, row].view(np.int32),
+                                      err_msg=f"output {row}")
     # the rest to rounding: of the result, or of the operands' products where terms cancel (dot, cross, mix)
     terms = (np.abs(a) * np.abs(b)).sum(axis=1) + np.abs(a).sum(axis=1) + np.abs(b).sum(axis=1)
     tolerance = 2e-6 * np.abs(reference) + 4 * np.finfo(np.float32).eps * terms[:, None, None]
