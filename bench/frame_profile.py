@@ -8,7 +8,9 @@ through gpu_core's Renderer on a queue with profiling on: one warm-up
 render, then a measured one. Per module (the innermost frame of gpu_core
 outside ``device/`` that launched or read), it reports: kernel launches and
 the host time spent enqueueing them, the kernels' own time on the device
-(their profiling events: start to end), blocking reads and the host time
+(their profiling events: start to end), the device's idle time before
+them (since every kernel before had ended: the host's turn between
+kernels, after a blocking read or between launches), blocking reads and the host time
 spent waiting in them (which includes every kernel queued before), and
 device allocations and their host time. Launches pyopencl makes itself
 (its scan and sort kernels) are counted in the reads' waits, not in the
@@ -100,12 +102,19 @@ class Profile:
         Device.empty = timed_empty
 
     def kernel_times(self) -> dict:
-        """The device time of every recorded kernel, per module and per kernel name (ms)."""
+        """The device time of every recorded kernel, per module and per kernel
+        name (ms); and per module the device's idle time before the kernels
+        it launched (from the end of every kernel before to the start)."""
         per_kernel = collections.Counter()
         for where, name, event in self.events:
             ms = (event.profile.end - event.profile.start) * 1e-6
             self.rows[where]["kernel_ms"] += ms
             per_kernel[name] += ms
+        done = None
+        for where, _name, event in sorted(self.events, key=lambda e: e[2].profile.start):
+            if done is not None and event.profile.start > done:
+                self.rows[where]["idle_before_ms"] += (event.profile.start - done) * 1e-6
+            done = event.profile.end if done is None else max(done, event.profile.end)
         return dict(per_kernel.most_common())
 
 
@@ -118,9 +127,10 @@ def profiling_device(spec: str | None) -> Device:
 
 def table(rows: dict) -> str:
     """Per-module rows, the costliest first."""
-    columns = ("launches", "launch_ms", "kernel_ms", "reads", "read_wait_ms", "allocations", "allocation_ms")
+    columns = ("launches", "launch_ms", "kernel_ms", "idle_before_ms", "reads", "read_wait_ms", "allocations",
+               "allocation_ms")
     lines = ["| module | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
-    cost = lambda r: r["launch_ms"] + r["read_wait_ms"] + r["allocation_ms"]  # noqa: E731
+    cost = lambda r: r["launch_ms"] + r["idle_before_ms"] + r["read_wait_ms"] + r["allocation_ms"]  # noqa: E731
     for where, row in sorted(rows.items(), key=lambda item: -cost(item[1])):
         cells = [f"{row[c]:.2f}" if c.endswith("_ms") else str(int(row[c])) for c in columns]
         lines.append(f"| {where} | " + " | ".join(cells) + " |")
@@ -157,8 +167,9 @@ def main() -> int:
 
     rows = {where: dict(row) for where, row in profile.rows.items()}
     kernel_ms = sum(per_kernel.values())
+    idle_ms = sum(row["idle_before_ms"] for row in profile.rows.values())
     lines = [about, f"{args.scene} {args.size} {args.preset}, no denoiser: render call {wall_ms:.1f} ms; "
-             f"our kernels' own device time {kernel_ms:.1f} ms",
+             f"our kernels' own device time {kernel_ms:.1f} ms, the device idle between them {idle_ms:.1f} ms",
              "stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in result.stats["ms"].items()),
              table(profile.rows),
              "costliest kernels (device ms): " + ", ".join(f"{k} {v:.2f}" for k, v in list(per_kernel.items())[:12])]
