@@ -46,13 +46,17 @@ RESULTS = os.path.join(ROOT, "bench", "results")
 
 
 def caller() -> str:
-    """The innermost gpu_core frame outside device/ on the stack: 'module:function'."""
+    """The innermost gpu_core frame outside device/ on the stack: 'module:function'
+    (past a module's own launch wrapper, such as the point-tree build's, to the function that called it)."""
     frame = sys._getframe(2)
     while frame is not None:
-        path = frame.f_code.co_filename.replace(os.sep, "/")
-        if "/gpu_core/" in path and "/gpu_core/device/" not in path:
+        path = frame.f_code.co_filename
+        outer = frame.f_back
+        wrapper = frame.f_code.co_name == "launch" and outer is not None and outer.f_code.co_filename == path
+        path = path.replace(os.sep, "/")
+        if "/gpu_core/" in path and "/gpu_core/device/" not in path and not wrapper:
             return f"{path.split('/gpu_core/')[1]}:{frame.f_code.co_name}"
-        frame = frame.f_back
+        frame = outer
     return "other"
 
 
