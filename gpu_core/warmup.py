@@ -38,6 +38,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .accel.kdtree_overlay import OVERLAY_SHARE
 from .accel.point_tree import PointTree
 from .device import Device
 from .device.programs import compile_helpers, device_spec, start_helper, stop_helper
@@ -64,8 +65,8 @@ def small_copy(scene: Scene, settings: RenderSettings) -> tuple[Scene, RenderSet
     return replace(scene, camera=camera), replace(settings, **SMALL)
 
 
-# an edit's share of the triangles moved (an overlay tree holds them: accel/kdtree_overlay.py OVERLAY_SHARE)
-MOVED_SHARE = 1 / 16
+# an edit's share of the triangles moved: well within what an overlay tree holds, so the move warms its kernels
+MOVED_SHARE = OVERLAY_SHARE / 4
 EDIT_TURN = np.radians(2.0)  # the view's turn about its own vertical axis
 
 
