@@ -20,12 +20,15 @@ thread), "plan" (the stages of the first full-resolution render),
 worker), each sampled with the worker stopped (what stays held).
 
     python bench/viewport.py FILE.blend [--size 640x360] [--preset preview] [--repeat 3] [--edits 1000] [--settle]
+                             [--viewport-samples N]
 
 The session is the engine's, which compiles the edits' kernels on its idle
 worker once a view has settled; ``--settle`` waits for that (and reports
 the open's ``settled_ms``) before the first edit, as a user who looks at
 the opened view first; without it the first orbit comes as soon as the
-first full-resolution image is shown.
+first full-resolution image is shown. ``--viewport-samples`` sets Viewport
+Samples (0: until stopped; the view then never settles, and ``--settle``
+waits for the warm-up it pauses for).
 
 Writes bench/results/viewport_NAME.json and .txt.
 """
@@ -61,7 +64,13 @@ class Viewport:
         from blender_addon.viewport import ViewportSession, warm_edit_kernels
 
         self.bpy, self.width, self.height = bpy, width, height
-        self.session = ViewportSession(lambda: None, warm_up=warm_edit_kernels)  # as the engine makes it
+        self.warm_ups = 0  # warm-ups ended
+
+        def warm_up(job, should_stop):  # the engine's, counted
+            warm_edit_kernels(job, should_stop)
+            self.warm_ups += 1
+
+        self.session = ViewportSession(lambda: None, warm_up=warm_up)  # as the engine makes it
         self.sync = SceneSync()
         self.updates: list = []
         self._read_updates = read_updates
@@ -123,11 +132,14 @@ class Viewport:
 
     def settle(self, began: float, timeout: float = 300.0) -> float:
         """ms from ``began`` until the view has settled and the edit kernels'
-        warm-up (the engine's, on the idle worker) has ended."""
+        warm-up (the engine's, on the idle worker) has ended; in a view that
+        never settles (Viewport Samples 0), until its warm-up between passes
+        has ended."""
         while time.perf_counter() - began < timeout:
             if self.session.error:
                 raise RuntimeError(self.session.error)
-            if not self.session.busy and not self.session.warming:
+            idle = not self.session.busy or self.warm_ups > 0
+            if idle and not self.session.warming:
                 return (time.perf_counter() - began) * 1e3
             time.sleep(0.002)
         raise RuntimeError("the view did not settle in time")
@@ -179,6 +191,8 @@ def main() -> None:
     parser.add_argument("--settle", action="store_true",
                         help="before the first edit, wait until the opened view has settled and the edit kernels' "
                              "warm-up has ended (as a user who looks at the image first)")
+    parser.add_argument("--viewport-samples", type=int, default=None,
+                        help="Viewport Samples (0: until stopped); default: the file's")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     bpy = load_bpy()
@@ -186,10 +200,13 @@ def main() -> None:
     scene = bpy.context.scene
     scene.render.engine = "GPUGI"
     scene.gpugi.mode, scene.gpugi.preset = "GI", args.preset.upper()
+    if args.viewport_samples is not None:
+        scene.gpugi.preview_samples = args.viewport_samples
     center, size = scene_bounds(bpy)
     viewport = Viewport(bpy, width, height)
     name = os.path.splitext(os.path.basename(args.blend))[0]
-    lines = [f"# {describe()}", f"# {name} at {width}x{height}, preset {args.preset}, medians of {args.repeat} runs"]
+    lines = [f"# {describe()}", f"# {name} at {width}x{height}, preset {args.preset}, Viewport Samples "
+                                f"{scene.gpugi.preview_samples}, medians of {args.repeat} runs"]
     results = []
 
     def report(event: str, runs: list[dict]) -> None:

@@ -16,7 +16,9 @@ the later passes out (adaptive sampling, as Cycles' viewport does), and
 the view is done once every pixel has. An edit names the parts it
 changed, which the renderer alone uploads and invalidates. Once a view
 has settled, the engine's session compiles on the idle worker the kernels
-that edits launch and the open did not (``warm_edit_kernels``). Nothing here
+that edits launch and the open did not (``warm_edit_kernels``); a view that
+never settles (Viewport Samples 0) pauses for it once it has as many
+samples as the default view settles with. Nothing here
 touches Blender data: the engine passes exported scenes, cameras and
 settings in.
 """
@@ -54,6 +56,10 @@ BATCH_SECONDS = 0.03
 # samples every pixel takes before its noise is judged, with Min Samples 0
 # and Viewport Samples 0 (until stopped); else a quarter of Viewport Samples
 OPEN_MIN_SAMPLES = 16
+# samples after which a view that never settles (Viewport Samples 0, no
+# noise threshold reached) pauses to warm the edits' kernels, then goes on:
+# the samples of the default view (Viewport Samples 32) when it settles
+UNSETTLED_WARM_SAMPLES = 32
 
 
 @dataclasses.dataclass(frozen=True)
@@ -250,7 +256,9 @@ class ViewportSession:
     ``redraw`` is called (from the worker) whenever a new image or error is
     ready; ``make_renderer(device_spec)`` builds the renderer the worker uses;
     ``warm_up(job, should_stop)`` (the engine's: ``warm_edit_kernels``), when
-    given, runs on the worker after a view has settled, until an edit comes.
+    given, runs on the worker after a view has settled, until an edit comes;
+    in a view that takes samples until stopped, once between its passes
+    after UNSETTLED_WARM_SAMPLES.
     """
 
     def __init__(self, redraw: Callable[[], None], make_renderer=default_renderer, warm_up=None):
@@ -373,10 +381,15 @@ class ViewportSession:
                     self._running = False
                     self.warming = settled and self._warm_up is not None
             if self.warming:
-                try:
-                    self._warm_up(job, self._waited_for)
-                finally:
-                    self.warming = False
+                self._warm(job, self._waited_for)
+
+    def _warm(self, job: Job, should_stop: Callable[[], bool]) -> None:
+        """Run the warm-up for ``job`` until ``should_stop()`` (``warming`` meanwhile)."""
+        self.warming = True
+        try:
+            self._warm_up(job, should_stop)
+        finally:
+            self.warming = False
 
     def _waited_for(self) -> bool:
         """A job is queued or the session is closing (what stops a warm-up)."""
@@ -408,6 +421,10 @@ class ViewportSession:
                 self._notify()
                 if film.done:
                     return True
+                if (self._warm_up is not None and film.target <= 0
+                        and film.samples >= UNSETTLED_WARM_SAMPLES > film.samples - step.samples):
+                    # a view that may never settle warms up once, between two passes
+                    self._warm(job, lambda: stop.is_set() or self._waited_for())
         except RenderCancelled:
             return False
         except GpuGiError as err:

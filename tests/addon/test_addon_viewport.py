@@ -14,8 +14,8 @@ import pytest
 
 from blender_addon.display import DISPLAY_MAX, prepare_pixels
 from blender_addon.engine import GpuGiRenderEngine
-from blender_addon.viewport import (BATCH_SECONDS, COARSE_FACTOR, OPEN_MIN_SAMPLES, Job, ViewportSession, pass_settings,
-                                   passes, view_state)
+from blender_addon.viewport import (BATCH_SECONDS, COARSE_FACTOR, OPEN_MIN_SAMPLES, UNSETTLED_WARM_SAMPLES, Job,
+                                   ViewportSession, pass_settings, passes, view_state)
 from gpu_core.device import get_device
 from gpu_core.scene import FILTER_BLACKMAN_HARRIS, FILTER_BOX
 from gpu_core.errors import DeviceError, RenderCancelled
@@ -472,6 +472,25 @@ def test_a_view_stopped_before_it_settled_does_not_warm_up():
     renderer.block = False
     _wait_idle(session)
     assert [job.scene.camera.width for job in warm_up.jobs] == [16]  # only the view that settled
+
+
+def test_a_view_that_never_settles_warms_up_once_between_its_passes_and_goes_on():
+    # Viewport Samples 0 and no noise threshold: the view never settles, so it
+    # pauses once it holds as many samples as the default view settles with
+    renderer, held_at_warm_up = FakeRenderer(), []
+
+    def warm_up(job, should_stop):
+        held_at_warm_up.append(renderer.starts[-1] + renderer.calls[-1][2])
+
+    session = _warming_session(renderer, warm_up)
+    session.update_scene(_job(samples=0), signature=("view", 1))
+    deadline = time.time() + 10
+    while len(renderer.calls) < 12 and time.time() < deadline:
+        time.sleep(0.005)
+    session.stop()
+    assert len(renderer.calls) >= 12  # passes went on after the warm-up
+    assert held_at_warm_up == [47]  # once: after the first pass to reach 32 samples (1 + 2 + 4 + 8 + 16 + 16)
+    assert UNSETTLED_WARM_SAMPLES == 32 == RenderSettings().preview_samples
 
 
 def test_closing_the_view_does_not_wait_for_a_warm_up_stage():
