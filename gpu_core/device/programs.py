@@ -153,6 +153,12 @@ def load_source(name: str) -> str:
     return expand(name)
 
 
+def with_inline_builtins(source: str) -> str:
+    """A program's source as PoCL builds it: after the header that inlines
+    OpenCL's math builtins (pocl_builtins.h)."""
+    return f'#line 1 "device/{_INLINE_BUILTINS.name}"\n{_INLINE_BUILTINS.read_text()}\n{source}'
+
+
 def built_as(name: str, defines: dict | None = None) -> str:
     """The program that holds program ``name`` built with ``defines``: the
     bundle for a bundled program without defines, the scene bundle for a
@@ -389,7 +395,7 @@ class Programs:
         device, and its file in the disk cache."""
         source = load_source(name)
         if self._inline_builtins:
-            source = f'#line 1 "device/{_INLINE_BUILTINS.name}"\n{_INLINE_BUILTINS.read_text()}\n{source}'
+            source = with_inline_builtins(source)
         if self._exact_division:
             options = options + (_EXACT_DIVISION,)
         if self._separate:
