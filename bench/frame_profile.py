@@ -1,7 +1,7 @@
 """Where one frame's time goes on a device: kernels, launches, blocking reads
 and allocations, per module of gpu_core, without Blender.
 
-    python bench/frame_profile.py [--device gpu] [--scene cornell_box] [--preset preview] [--size 256]
+    python bench/frame_profile.py [--device gpu] [--scene cornell_box] [--preset preview] [--size 256] [--gpu-paths]
 
 Renders a snapshot of ``bench/frame_snapshot.py save`` (``.cache/snapshots/``)
 through gpu_core's Renderer on a queue with profiling on: one warm-up
@@ -16,7 +16,10 @@ device allocations and their host time. Launches pyopencl makes itself
 (its scan and sort kernels) are counted in the reads' waits, not in the
 kernels' time. The render's wall time and its stages come last: where the
 kernels' own time is a small part of the wall, the frame is launch- and
-read-bound. Writes bench/results/frame_profile[_TAG].json and .txt.
+read-bound. ``--gpu-paths`` makes gpu_core take a GPU's paths on any device
+(trees built level by level, no one-work-item builds, no leaf blocks), so
+that a CPU counts the launches and reads a GPU frame makes. Writes
+bench/results/frame_profile[_TAG].json and .txt.
 """
 
 from __future__ import annotations
@@ -151,7 +154,12 @@ def main() -> int:
     parser.add_argument("--preset", default="preview", choices=("draft", "preview", "final"))
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--tag", default="")
+    parser.add_argument("--gpu-paths", action="store_true",
+                        help="take the paths a GPU takes (launched tree builds, no leaf blocks) on any device, to "
+                             "count what a GPU frame launches and reads back without one")
     args = parser.parse_args()
+    if args.gpu_paths:
+        Device.is_cpu = property(lambda device: False)
 
     snapshot = load(os.path.join(SNAPSHOTS, f"{args.scene}.pkl"))
     scene, settings = snapshot["exports"][args.size], replace(snapshot["settings"][args.preset], denoise=False)
@@ -172,7 +180,8 @@ def main() -> int:
     rows = {where: dict(row) for where, row in profile.rows.items()}
     kernel_ms = sum(per_kernel.values())
     idle_ms = sum(row["idle_before_ms"] for row in profile.rows.values())
-    lines = [about, f"{args.scene} {args.size} {args.preset}, no denoiser: render call {wall_ms:.1f} ms; "
+    paths = ", the GPU's paths" if args.gpu_paths else ""
+    lines = [about, f"{args.scene} {args.size} {args.preset}{paths}, no denoiser: render call {wall_ms:.1f} ms; "
              f"our kernels' own device time {kernel_ms:.1f} ms, the device idle between them {idle_ms:.1f} ms",
              "stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in result.stats["ms"].items()),
              table(profile.rows),
