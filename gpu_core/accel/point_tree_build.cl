@@ -731,7 +731,7 @@ __kernel void PointBuild_emit(const __global BuildNode *nodes, const __global Bu
                            out_info, out_pts, out_power, out_dir, out_normal);
 }
 
-/* ---- the whole build in one work-item ------------------------------------ */
+/* ---- the whole build in one launch -------------------------------------- */
 
 /* Slots of the batch list: the root's, one a level (a level deepens every
  * node it keeps, so there are at most POINT_TREE_MAX_DEPTH of each stage). */
@@ -833,7 +833,8 @@ __kernel void PointBuild_serial(const int n, const int L, const int B, const int
             PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth,
                                        x_plane);
         POINT_BUILD_SYNC();
-        POINT_BUILD_EACH(c, total) chunk_left[c] = PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, work);
+        POINT_BUILD_EACH(c, total)
+            chunk_left[c] = PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, work);
         POINT_BUILD_SYNC();
         if (lead) {
             int run = 0;

@@ -41,7 +41,7 @@ EMPTY_RATIO = 0.1  # empty fraction of a cell that is cut off, retuned for point
 COST_TRAVERSE = 3.0  # VVH cost of visiting a node, in point tests (kNN fastest at 3 on photon maps)
 SERIAL_MAX = 16384  # largest point set built in one launch
 SERIAL_BATCHES = 2 * MAX_DEPTH + 2  # BUILD_SERIAL_BATCHES
-# node table of the one work-item build: SERIAL_ROOM slots a point and SERIAL_SLACK more (measured: at
+# node table of the one-launch build: SERIAL_ROOM slots a point and SERIAL_SLACK more (measured: at
 # most half a slot a point on clouds, walls, lines, planes and tight clusters); it falls back when full
 SERIAL_ROOM = 1.0
 SERIAL_SLACK = 256
