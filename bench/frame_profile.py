@@ -17,8 +17,8 @@ device allocations and their host time. Launches pyopencl makes itself
 kernels' time. The render's wall time and its stages come last: where the
 kernels' own time is a small part of the wall, the frame is launch- and
 read-bound. ``--gpu-paths`` makes gpu_core take a GPU's paths on any device
-(trees built level by level, no one-work-item builds, no leaf blocks), so
-that a CPU counts the launches and reads a GPU frame makes. Writes
+(the kd-tree built level by level, small point trees by a work-group, no
+leaf blocks), so that a CPU counts the launches and reads a GPU frame makes. Writes
 bench/results/frame_profile[_TAG].json and .txt.
 """
 
@@ -155,8 +155,9 @@ def main() -> int:
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--tag", default="")
     parser.add_argument("--gpu-paths", action="store_true",
-                        help="take the paths a GPU takes (launched tree builds, no leaf blocks) on any device, to "
-                             "count what a GPU frame launches and reads back without one")
+                        help="take the paths a GPU takes (the kd-tree built level by level, small point trees by "
+                             "a work-group, no leaf blocks) on any device, to count what a GPU frame launches and "
+                             "reads back without one")
     args = parser.parse_args()
     if args.gpu_paths:
         Device.is_cpu = property(lambda device: False)
