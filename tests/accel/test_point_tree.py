@@ -196,7 +196,7 @@ def test_the_one_launch_build_falls_back_when_its_node_table_is_full(device, mon
     assert_same_tree(tree, wanted)
 
 
-def test_small_sets_are_built_in_one_launch_by_one_work_item_on_a_cpu_device(device, monkeypatch):
+def test_small_sets_are_built_in_one_launch_by_one_work_item_on_a_cpu_and_a_work_group_elsewhere(device, monkeypatch):
     groups = []
     original = kernels.Kernel.groups
     monkeypatch.setattr(kernels.Kernel, "groups", lambda self, count, group, *args: (
