@@ -11,8 +11,9 @@ the host time spent enqueueing them, the kernels' own time on the device
 (their profiling events: start to end), the device's idle time before
 them (since every kernel before had ended: the host's turn between
 kernels, after a blocking read or between launches), blocking reads and the host time
-spent waiting in them (which includes every kernel queued before), and
-device allocations and their host time. Launches pyopencl makes itself
+spent waiting in them (which includes every kernel queued before), reads
+queued without blocking (``Device.read_later``: waited on once more work is
+queued) and the host's wait on them, and device allocations and their host time. Launches pyopencl makes itself
 (its scan and sort kernels) are counted in the reads' waits, not in the
 kernels' time. The render's wall time and its stages come last: where the
 kernels' own time is a small part of the wall, the frame is launch- and
@@ -42,6 +43,7 @@ from frame_snapshot import SNAPSHOTS, load  # noqa: E402
 from machine import describe  # noqa: E402
 
 from gpu_core.device import Device, get_device  # noqa: E402
+from gpu_core.device.device import PendingRead  # noqa: E402
 from gpu_core.device import kernels as kernels_module  # noqa: E402
 from gpu_core.renderer import Renderer  # noqa: E402
 
@@ -72,8 +74,8 @@ class Profile:
         self.active = False
 
     def install(self) -> None:
-        """Wrap the launch helper, blocking copies and buffer creation."""
-        enqueue, copy, buffer = cl.enqueue_nd_range_kernel, cl.enqueue_copy, Device.empty
+        """Wrap the launch helper, blocking copies, waits on queued reads and buffer creation."""
+        enqueue, copy, buffer, wait = cl.enqueue_nd_range_kernel, cl.enqueue_copy, Device.empty, PendingRead.wait
         profile = self
 
         def timed_enqueue(queue, kernel, *args, **kw):
@@ -95,6 +97,15 @@ class Profile:
                 profile.rows[where]["read_wait_ms"] += ms
             return event
 
+        def timed_wait(pending):
+            began = time.perf_counter()
+            values = wait(pending)
+            if profile.active:
+                ms, where = (time.perf_counter() - began) * 1e3, caller()
+                profile.rows[where]["queued_reads"] += 1
+                profile.rows[where]["queued_wait_ms"] += ms
+            return values
+
         def timed_empty(device, nbytes):
             began = time.perf_counter()
             made = buffer(device, nbytes)
@@ -107,6 +118,7 @@ class Profile:
         kernels_module.cl.enqueue_nd_range_kernel = timed_enqueue
         cl.enqueue_copy = timed_copy
         Device.empty = timed_empty
+        PendingRead.wait = timed_wait
 
     def kernel_times(self) -> dict:
         """The device time of every recorded kernel, per module and per kernel
@@ -134,10 +146,11 @@ def profiling_device(spec: str | None) -> Device:
 
 def table(rows: dict) -> str:
     """Per-module rows, the costliest first."""
-    columns = ("launches", "launch_ms", "kernel_ms", "idle_before_ms", "reads", "read_wait_ms", "allocations",
-               "allocation_ms")
+    columns = ("launches", "launch_ms", "kernel_ms", "idle_before_ms", "reads", "read_wait_ms", "queued_reads",
+               "queued_wait_ms", "allocations", "allocation_ms")
     lines = ["| module | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
-    cost = lambda r: r["launch_ms"] + r["idle_before_ms"] + r["read_wait_ms"] + r["allocation_ms"]  # noqa: E731
+    cost = lambda r: (r["launch_ms"] + r["idle_before_ms"] + r["read_wait_ms"] + r["queued_wait_ms"]  # noqa: E731
+                      + r["allocation_ms"])
     for where, row in sorted(rows.items(), key=lambda item: -cost(item[1])):
         cells = [f"{row[c]:.2f}" if c.endswith("_ms") else str(int(row[c])) for c in columns]
         lines.append(f"| {where} | " + " | ".join(cells) + " |")

@@ -70,7 +70,7 @@ inline void PointBuild_store_children(__global BuildNode *nodes, int id, int c0,
 /* Chunks of this level: chunk_end is the inclusive scan of the active
  * nodes' chunk counts. */
 inline int PointBuild_chunk_total(const __global int *chunk_end, int n_active) {
-    return chunk_end[n_active - 1];
+    return n_active > 0 ? chunk_end[n_active - 1] : 0;
 }
 
 /* The `n` chunks of the node of `count` points from `start`, the
@@ -107,11 +107,16 @@ inline void PointBuild_chunk_bounds_at(int c, const __global Chunk *chunks, cons
     chunk_hi[c] = hi;
 }
 
+/* The launched large stage's kernels read the level's active node count
+ * from the device (active_count[0]: the last level's count of large
+ * nodes), and are launched over a bound of it, so that the host queues a
+ * level before it has read how many nodes the level before made. */
 __kernel void PointBuild_chunk_bounds(const __global Chunk *chunks, const __global float4 *pts,
                                  __global float4 *chunk_lo, __global float4 *chunk_hi,
-                                 const __global int *chunk_end, const int n_active) {
+                                 const __global int *chunk_end, const __global int *active_count) {
     int c = Launch_global_id();
-    if (c < PointBuild_chunk_total(chunk_end, n_active)) PointBuild_chunk_bounds_at(c, chunks, pts, chunk_lo, chunk_hi);
+    if (c < PointBuild_chunk_total(chunk_end, active_count[0]))
+        PointBuild_chunk_bounds_at(c, chunks, pts, chunk_lo, chunk_hi);
 }
 
 /* Spatial-median split of the longest axis of the cell lo..hi that the
@@ -196,9 +201,10 @@ inline void PointBuild_large_decide_at(int j, const __global int *active, __glob
 __kernel void PointBuild_large_decide(const __global int *active, __global BuildNode *nodes,
                                  const __global int *chunk_end, const __global float4 *chunk_lo,
                                  const __global float4 *chunk_hi, const float empty_ratio,
-                                 const int max_depth, __global float4 *x_plane, const int n_active) {
+                                 const int max_depth, __global float4 *x_plane,
+                                 const __global int *active_count) {
     int j = Launch_global_id();
-    if (j < n_active)
+    if (j < active_count[0])
         PointBuild_large_decide_at(j, active, nodes, chunk_end, chunk_lo, chunk_hi, empty_ratio, max_depth, x_plane);
 }
 
@@ -220,10 +226,11 @@ inline int PointBuild_chunk_count_left_at(int c, const __global Chunk *chunks, c
 __kernel void PointBuild_chunk_count_left(const __global Chunk *chunks, const __global int *active,
                                      const __global BuildNode *nodes, const __global float4 *x_plane,
                                      const __global float4 *pts, __global int *chunk_left,
-                                     const __global int *chunk_end, const int n_active, const int bound) {
+                                     const __global int *chunk_end, const __global int *active_count,
+                                     const int bound) {
     int c = Launch_global_id();
     if (c >= bound) return;
-    chunk_left[c] = c < PointBuild_chunk_total(chunk_end, n_active)
+    chunk_left[c] = c < PointBuild_chunk_total(chunk_end, active_count[0])
                         ? PointBuild_chunk_count_left_at(c, chunks, active, nodes, x_plane, pts)
                         : 0;
 }
@@ -269,21 +276,22 @@ inline void PointBuild_sides(const BuildNode *nd, PointBuildPlane plane, BuildNo
 }
 
 /* Create the children of every active node j at child_base + 2 j and, after
- * an empty-space cut, the children of X at child_base + 2 n_active + 2 j
+ * an empty-space cut, the children of X at child_base + 2 slots + 2 j
  * (holes otherwise), with their classes (PointBuild_class) in the
  * same slots of `classes`; left_end is the inclusive scan of the chunks'
- * left counts. */
+ * left counts. `slots`: the active nodes the level has room for, at least
+ * their number. */
 inline void PointBuild_large_split_at(int j, const __global int *active, __global BuildNode *nodes,
                                      const __global int *chunk_end, const __global int *left_end,
                                      const __global float4 *x_plane, int child_base, int max_depth,
-                                     __global int8 *classes, int n_active) {
+                                     __global int8 *classes, int slots) {
     int id = active[j];
     BuildNode nd = nodes[id];
     int n_left = PointBuild_left_count(chunk_end, left_end, j);
     float4 xp = x_plane[j];
     int x_axis = as_int(xp.y);
-    int x_base = child_base + 2 * n_active + 2 * j;
-    __global int8 *cls = classes + 2 * j, *x_cls = classes + 2 * n_active + 2 * j;
+    int x_base = child_base + 2 * slots + 2 * j;
+    __global int8 *cls = classes + 2 * j, *x_cls = classes + 2 * slots + 2 * j;
     BuildNode l, r;
     PointBuild_sides(&nd, (PointBuildPlane){nd.axis, nd.split}, &l, &r);
     if (x_axis < 0) {
@@ -323,14 +331,23 @@ inline void PointBuild_large_split_at(int j, const __global int *active, __globa
     x_cls[1] = PointBuild_class(xr.count, x.depth + 1, max_depth);
 }
 
+/* Over the level's `slots`: the active nodes split, the slots past them
+ * holes of class 0. */
 __kernel void PointBuild_large_split(const __global int *active, __global BuildNode *nodes,
                                 const __global int *chunk_end, const __global int *left_end,
                                 const __global float4 *x_plane, const int child_base, const int max_depth,
-                                __global int8 *classes, const int n_active) {
+                                __global int8 *classes, const __global int *active_count, const int slots) {
     int j = Launch_global_id();
-    if (j < n_active)
+    if (j >= slots) return;
+    if (j < active_count[0]) {
         PointBuild_large_split_at(j, active, nodes, chunk_end, left_end, x_plane, child_base, max_depth, classes,
-                                  n_active);
+                                  slots);
+        return;
+    }
+    PointBuild_store_holes(nodes, child_base + 2 * j);
+    PointBuild_store_holes(nodes, child_base + 2 * slots + 2 * j);
+    classes[2 * j] = classes[2 * j + 1] = (int8)(0);
+    classes[2 * slots + 2 * j] = classes[2 * slots + 2 * j + 1] = (int8)(0);
 }
 
 /* Stable partition of each chunk's points to the two sides of its node's
@@ -360,9 +377,9 @@ __kernel void PointBuild_chunk_scatter(const __global Chunk *chunks, const __glo
                                   const __global BuildNode *nodes, const __global float4 *x_plane,
                                   const __global float4 *pts, __global float4 *out,
                                   const __global int *chunk_left, const __global int *left_end,
-                                  const __global int *chunk_end, const int n_active) {
+                                  const __global int *chunk_end, const __global int *active_count) {
     int c = Launch_global_id();
-    if (c < PointBuild_chunk_total(chunk_end, n_active))
+    if (c < PointBuild_chunk_total(chunk_end, active_count[0]))
         PointBuild_chunk_scatter_at(c, chunks, active, nodes, x_plane, pts, out, chunk_left, left_end, chunk_end);
 }
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pyopencl as cl
 import pyopencl.array as cla
 import pyopencl.cltypes as cltypes
 
@@ -133,7 +134,14 @@ class _Build:
         self.device.kernel(PROGRAM, name)(n, *args)
 
     def large_stage(self) -> None:
-        """Median splits and empty-space cuts, level by level."""
+        """Median splits and empty-space cuts, level by level. The host
+        queues each level before it has read how many large nodes the level
+        before made: the level's kernels read that count on the device and
+        run over room for twice the count of the level before (a node makes
+        at most two large nodes), which the host reads while the device
+        works on the level queued after it. So the device does not wait on
+        the host between levels; the last level queued finds no active node
+        and does nothing."""
         if self.n <= SMALL_MAX:
             return
         dev = self.device
@@ -141,55 +149,71 @@ class _Build:
         chunk_end = dev.array_from(np.array([-(-self.n // CHUNK_POINTS)], np.int32))
         chunks = dev.array(1 + self.n // CHUNK_POINTS, CHUNK_DTYPE)
         self.launch("PointBuild_root_chunks", 1, self.table.array.data, chunk_end.data, chunks.data)
-        n_active = 1
-        while n_active:
+        count = dev.to_device(np.array([1, 0], np.int32))  # the level's active nodes: the root alone
+        slots, before = 1, None
+        while True:
+            active, chunk_end, chunks, count, small = self._large_level(active, chunk_end, chunks, count, slots)
+            made = (dev.read_later(count, 2, np.int32), small)  # the large nodes and small roots it makes
+            n_active = 1 if before is None else self._made(before)  # the level just queued had these
+            if not n_active:
+                self._made(made)
+                return
             self.large_levels += 1
-            active, chunk_end, chunks, n_active = self._large_level(active, chunk_end, chunks, n_active)
+            slots, before = 2 * n_active, made
 
-    def _large_level(self, active: cla.Array, chunk_end: cla.Array, chunks: cla.Array, n_active: int) -> tuple:
-        """One level over the active nodes, whose chunks (and their inclusive
-        scan per node, chunk_end) the last level listed; returns the next
-        level's."""
+    def _made(self, made: tuple) -> int:
+        """Wait for a level's counts (read_later, with its list of small
+        roots): keep its small roots; return its count of large nodes."""
+        read, small = made
+        n_large, n_small = (int(v) for v in read.wait())
+        if n_small:
+            self.small_parts.append(small[:n_small])
+        return n_large
+
+    def _large_level(self, active: cla.Array, chunk_end: cla.Array, chunks: cla.Array, count: cl.Buffer,
+                     slots: int) -> tuple:
+        """One level over the active nodes (``count``: their number on the
+        device, at most ``slots``), whose chunks (and their inclusive scan
+        per node, chunk_end) the last level listed; returns the next level's
+        lists, their counts (large nodes, small roots: a device buffer) and
+        the small roots' list."""
         dev, nodes, i32 = self.device, self.table.array, np.int32
         # chunk bounds (the chunk count stays on the device: the chunk
         # kernels run over a bound)
-        bound = n_active + self.n // CHUNK_POINTS
+        bound = slots + self.n // CHUNK_POINTS
         chunk_lo, chunk_hi = dev.array(4 * bound, np.float32), dev.array(4 * bound, np.float32)
         chunk_left, left_end = dev.array(bound, np.int32), dev.array(bound, np.int32)
-        level = (chunk_end.data, i32(n_active))
+        level = (chunk_end.data, count)
         self.launch("PointBuild_chunk_bounds", bound, chunks.data, self.work.data, chunk_lo.data, chunk_hi.data, *level)
         # each node's cut and the split of what it keeps, or its split; then
         # its points partitioned stably
-        x_plane = dev.array(4 * n_active, np.float32)
-        self.launch("PointBuild_large_decide", n_active, active.data, nodes.data, chunk_end.data, chunk_lo.data,
-                    chunk_hi.data, np.float32(self.params.empty_ratio), self.max_depth, x_plane.data, i32(n_active))
+        x_plane = dev.array(4 * slots, np.float32)
+        self.launch("PointBuild_large_decide", slots, active.data, nodes.data, chunk_end.data, chunk_lo.data,
+                    chunk_hi.data, np.float32(self.params.empty_ratio), self.max_depth, x_plane.data, count)
         self.launch("PointBuild_chunk_count_left", bound, chunks.data, active.data, nodes.data, x_plane.data,
                     self.work.data, chunk_left.data, *level, i32(bound))
         primitives.scan(dev, chunk_left.data, bound, out=left_end.data, inclusive=True)
-        # children two per node, then the children of the cut-off parts two per node (holes where none)
-        new = 4 * n_active
+        # children two per slot, then the children of the cut-off parts two per slot (holes where none)
+        new = 4 * slots
         base = self.table.reserve(new)
         nodes = self.table.array
         classes = dev.array(new, cltypes.int8)
-        self.launch("PointBuild_large_split", n_active, active.data, nodes.data, chunk_end.data, left_end.data,
-                    x_plane.data, i32(base), self.max_depth, classes.data, i32(n_active))
+        self.launch("PointBuild_large_split", slots, active.data, nodes.data, chunk_end.data, left_end.data,
+                    x_plane.data, i32(base), self.max_depth, classes.data, count, i32(slots))
         self.launch("PointBuild_chunk_scatter", bound, chunks.data, active.data, nodes.data, x_plane.data,
                     self.work.data, self.scratch.data, chunk_left.data, left_end.data, *level)
         self.work, self.scratch = self.scratch, self.work  # the partitioned points are the working array now
         # one batch: the children of the cut-off parts (after them) are done with their parents
-        self.batches.append((base, 2 * n_active, base + 2 * n_active, base + new))
+        self.batches.append((base, 2 * slots, base + 2 * slots, base + new))
         # new nodes: the next level's large nodes with their chunks, and the
-        # small roots, counted together (lanes of one int8) and read in one go
+        # small roots, counted together (lanes of one int8)
         scanned = dev.array(new, cltypes.int8)
         total = primitives.scan(dev, classes.data, new, kind="int8", out=scanned.data)
         large, small, next_end = (dev.array(new, np.int32) for _ in range(3))
         next_chunks = dev.array(new + self.n // CHUNK_POINTS, CHUNK_DTYPE)
         self.launch("PointBuild_lists", new, classes.data, scanned.data, i32(base), i32(new), nodes.data,
                     self.work.data, self.scratch.data, large.data, small.data, next_end.data, next_chunks.data)
-        n_large, n_small = (int(v) for v in dev.read(total, 2, np.int32))
-        if n_small:
-            self.small_parts.append(small[:n_small])
-        return large, next_end, next_chunks, n_large
+        return large, next_end, next_chunks, total, small
 
     def small_stage(self) -> None:
         """VVH splits over bit masks of each small root's points."""

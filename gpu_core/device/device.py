@@ -24,6 +24,19 @@ from .programs import Programs
 
 
 @dataclass
+class PendingRead:
+    """A read queued without waiting (Device.read_later)."""
+
+    values: np.ndarray
+    event: cl.Event
+
+    def wait(self) -> np.ndarray:
+        """The values, once the read is done."""
+        self.event.wait()
+        return self.values
+
+
+@dataclass
 class Transfers:
     """Bytes moved by one thread: host to device and device to host."""
 
@@ -165,6 +178,14 @@ class Device:
     def read(self, buf: cl.Buffer, shape, dtype, offset: int = 0) -> np.ndarray:
         """A new host array of ``shape`` and ``dtype`` read from ``buf``."""
         return self.to_host(buf, np.empty(shape, dtype), offset)
+
+    def read_later(self, buf: cl.Buffer, shape, dtype) -> "PendingRead":
+        """A read of ``buf`` queued behind the work queued so far and not
+        waited for: the host queues more work, then waits on the result
+        (``PendingRead.wait``) while the device runs it."""
+        out = np.empty(shape, dtype)
+        self._count("to_host", out.nbytes)
+        return PendingRead(out, cl.enqueue_copy(self.queue, out, buf, is_blocking=False))
 
     def read_xyz(self, buf: cl.Buffer, count: int) -> np.ndarray:
         """(count, 3) float32: the xyz of ``count`` float4 rows of ``buf``."""

@@ -121,17 +121,47 @@ def count_reads(device, monkeypatch) -> list:
     return reads
 
 
-def test_the_build_reads_back_one_value_per_level(device, monkeypatch):
-    """The host learns each level's list sizes from one read (the chunk
-    counts stay on the device); add one for the VVH radius estimates and
-    one for the node count (the node table has unused slots)."""
+def test_the_build_waits_on_one_read_per_small_level_and_none_in_the_large_stage(device, monkeypatch):
+    """The large stage's levels queue their counts' reads without waiting
+    (one a level, and one for the last level queued, which finds no node);
+    the host waits on small levels' reads alone, plus one for the VVH
+    radius estimates and one for the node count (the node table has unused
+    slots)."""
     reads = count_reads(device, monkeypatch)
+    queued = []
+    read_later = type(device).read_later
+    monkeypatch.setattr(type(device), "read_later", lambda self, *a: (queued.append(1), read_later(self, *a))[1])
     points = CLOUDS["clustered"].astype(np.float32)
     tree = PointTree.build(device, points, serial_max=0)
-    levels = tree.stats["large_levels"] + tree.stats["small_levels"]
     assert tree.stats["large_levels"] >= 3
-    assert len(reads) <= levels + 2
+    assert len(queued) == tree.stats["large_levels"] + 1
+    assert len(reads) <= tree.stats["small_levels"] + 2
     check_knn(tree, points, RNG.random((50, 3)).astype(np.float32), 8)
+
+
+def test_the_host_waits_on_a_large_level_s_counts_only_once_the_next_level_is_queued(device, monkeypatch):
+    """Between a level's queued read and the wait on it the host queues
+    the next level, so the device has work while the host waits."""
+    log = []
+    launch = point_tree_build._Build.launch
+    monkeypatch.setattr(point_tree_build._Build, "launch", lambda self, name, *a: (log.append(name), launch(self, name, *a)))
+    read_later = type(device).read_later
+
+    def logged_read(self, *args):
+        pending = read_later(self, *args)
+        log.append("read")
+        wait = pending.wait
+        monkeypatch.setattr(pending, "wait", lambda: (log.append("wait"), wait())[1])
+        return pending
+
+    monkeypatch.setattr(type(device), "read_later", logged_read)
+    tree = PointTree.build(device, CLOUDS["clustered"].astype(np.float32), serial_max=0)
+    large = log[: log.index("PointBuild_small_roots")]
+    reads = [i for i, entry in enumerate(large) if entry == "read"]
+    waits = [i for i, entry in enumerate(large) if entry == "wait"]
+    assert len(reads) == len(waits) == tree.stats["large_levels"] + 1
+    for read, wait in zip(reads[:-1], waits[:-1]):
+        assert "PointBuild_chunk_bounds" in large[read:wait]
 
 
 def test_the_one_launch_build_reads_back_once(device, monkeypatch):
