@@ -59,6 +59,7 @@ COST_TRAVERSE_BLOCKS = 8.0
 BAD_SPLITS = 2  # median splits in a row without progress allowed before a large node is a leaf (fans, stacks)
 SAH_GROUP = 64  # work-group size of the per-node SAH search, and its work-items per node off the CPU
 ELEMENT_BUDGET = 8  # large-stage elements per triangle before nodes become leaves
+ELEMENT_SLACK = 65536  # large-stage elements allowed beyond the budget's share, for small meshes
 PROGRAM = "accel/kdtree_build.cl"
 RUN = 64  # large-stage elements a CPU work-item classifies and scatters in a row (32-128 alike at 636k)
 PREFETCH_AHEAD = 16  # elements ahead in a run the classification asks for a straddler's corners (16-64 alike)
@@ -69,6 +70,12 @@ SERIAL_MAX = 12288  # largest mesh one work-item builds on a CPU device (as fast
 # of triangles around one vertex: 105 leaf references a triangle)
 SERIAL_ROOM = {"elements": 3, "small": 3, "records": 6, "leaves": 16, "small_nodes": 2}
 SERIAL_SLACK = 1024
+
+
+def element_budget(triangle_count: int) -> int:
+    """Most elements a large level's children may hold before every large
+    child of that level becomes a leaf."""
+    return ELEMENT_BUDGET * triangle_count + ELEMENT_SLACK
 
 
 def depth_limit(triangle_count: int) -> int:
@@ -249,7 +256,7 @@ class _Build:
             self.leaf_tris, dev.array(batch_cap, cltypes.int2), dev.array(rec_cap, np.int32),
             dev.array(rec_cap, np.int32), nodes, result,
         ]
-        budget = ELEMENT_BUDGET * count + 65536
+        budget = element_budget(count)
         self.kernel("KdBuild_serial")(1, self.verts.data, i32(count), i32(self.max_depth), self.eps, i32(budget), caps,
                                       *(a.data for a in arrays))
         status, *counts = (int(v) for v in dev.get(result)[:7])
@@ -305,7 +312,7 @@ class _Build:
             bounds.groups(bound, self.config.chunk_group, *bounds_args)
         # each node's plane (after the cuts it chains where no child can spend
         # the element budget), each element's sides and clipped boxes
-        budget = ELEMENT_BUDGET * self.count + 65536
+        budget = element_budget(self.count)
         node_split, node_mode, node_chain = (dev.array(active, t) for t in (np.float32, np.int32, np.int32))
         chain_cut = dev.array(MAX_CHAIN * active, cltypes.int2)
         self.kernel("KdBuild_large_split")(

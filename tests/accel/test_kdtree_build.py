@@ -549,6 +549,27 @@ def test_the_one_work_item_build_falls_back_when_it_outgrows_its_room(device, mo
     assert_same_tree(tree, build_tree(device, verts_dev, count, serial_max=0, sah_lanes=1))
 
 
+def test_a_level_past_the_element_budget_makes_its_large_children_leaves(device, monkeypatch):
+    """Where a level's children would hold more elements than the budget,
+    every large child of the level becomes a leaf: fewer levels and larger leaves, every
+    triangle still listed in every leaf it reaches into, and the same tree
+    from both builders."""
+    tris = random_soup(3000, seed=14, size=0.3)
+    verts_dev, count = device_verts(device, tris)
+    free = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=0)
+    monkeypatch.setattr(kdtree_build, "ELEMENT_BUDGET", 1)
+    monkeypatch.setattr(kdtree_build, "ELEMENT_SLACK", 0)
+    launched = build_tree(device, verts_dev, count, sah_lanes=1, serial_max=0)
+    assert launched.stats["large_levels"] < free.stats["large_levels"]
+    assert launched.stats["max_leaf_size"] > SMALL
+    assert_same_tree(launched, build_tree(device, verts_dev, count, sah_lanes=1, serial_max=1 << 30))
+    monkeypatch.setattr(kdtree_build, "SERIAL_MAX", 0)
+    tree = kdtree.build(device, tris, blocks=False)
+    nodes, lo, hi, _, reached = walk(tree)
+    assert np.all(reached == 1)
+    assert not unlisted_overlaps(tris, nodes, tree.nodes_host()[1], lo, hi, scene_margin(tree))
+
+
 def test_only_a_cpu_device_builds_small_meshes_in_one_work_item(device):
     tris = random_soup(kdtree_build.SERIAL_MAX + 1, seed=10, size=0.001)
     assert ("serial" in kdtree.build(device, tris[:-1]).stats["ms"]) == device.is_cpu
