@@ -1,8 +1,9 @@
 """Device build of the point kd-tree (point_tree_build.cl), level by level.
 
 The host loops over tree levels and reads back only list sizes (one read
-per level); every kernel works on all nodes (or point chunks) of a level at
-once:
+per level; a large level's read is queued without waiting, and waited on
+once the next level is queued); every kernel works on all nodes (or point
+chunks) of a level at once:
 
 * large-node stage: an empty-space cut and a median split of what it keeps
   per node and level (or a median split alone), the points partitioned
