@@ -10,17 +10,18 @@ outside ``device/`` that launched or read), it reports: kernel launches and
 the host time spent enqueueing them, the kernels' own time on the device
 (their profiling events: start to end), the device's idle time before
 them (since every kernel before had ended: the host's turn between
-kernels, after a blocking read or between launches), blocking reads and the host time
-spent waiting in them (which includes every kernel queued before), reads
-queued without blocking (``Device.read_later``: waited on once more work is
-queued) and the host's wait on them, and device allocations and their host time. Launches pyopencl makes itself
-(its scan and sort kernels) are counted in the reads' waits, not in the
-kernels' time. The render's wall time and its stages come last: where the
-kernels' own time is a small part of the wall, the frame is launch- and
-read-bound. ``--gpu-paths`` makes gpu_core take a GPU's paths on any device
-(the kd-tree built level by level, small point trees by a work-group, no
-leaf blocks), so that a CPU counts the launches and reads a GPU frame makes. Writes
-bench/results/frame_profile[_TAG].json and .txt.
+kernels, after a blocking read or between launches), blocking reads and
+the host time spent waiting in them (which includes every kernel queued
+before), reads queued without blocking (``Device.read_later``: waited on
+once more work is queued) and the host's wait on them, and device
+allocations and their host time. Launches pyopencl makes itself (its scan
+and sort kernels) are counted in the reads' waits, not in the kernels'
+time. The render's wall time and its stages come last: where the kernels'
+own time is a small part of the wall, the frame is launch- and read-bound.
+``--gpu-paths`` makes gpu_core take a GPU's paths on any device (the
+kd-tree built level by level, small point trees by a work-group, no leaf
+blocks), so that a CPU counts the launches and reads a GPU frame makes.
+Writes bench/results/frame_profile[_TAG].json and .txt.
 """
 
 from __future__ import annotations

@@ -144,7 +144,8 @@ def test_the_host_waits_on_a_large_level_s_counts_only_once_the_next_level_is_qu
     the next level, so the device has work while the host waits."""
     log = []
     launch = point_tree_build._Build.launch
-    monkeypatch.setattr(point_tree_build._Build, "launch", lambda self, name, *a: (log.append(name), launch(self, name, *a)))
+    monkeypatch.setattr(point_tree_build._Build, "launch",
+                        lambda self, name, *a: (log.append(name), launch(self, name, *a)))
     read_later = type(device).read_later
 
     def logged_read(self, *args):
