@@ -96,6 +96,25 @@ def test_quadtree_node_means_and_errors_equal_numpy(device, shape, width, height
         assert (g["error"][filled] > 0).any() or level == len(got) - 1
 
 
+def test_quadtree_launches_grow_by_two_a_level_not_with_the_square_of_the_depth(device, monkeypatch):
+    """The errors of every level come from one pass over the leaves and one
+    launch a level upwards, as the sums do: each level more adds two launches
+    (a per-level error pass, summed up to its level, added depth + 2)."""
+    from gpu_core.device.kernels import Kernel
+    names = []
+    call = Kernel.__call__
+    monkeypatch.setattr(Kernel, "__call__", lambda self, *a: (names.append(self.name), call(self, *a))[1])
+    launches = {}
+    for size in (16, 64):
+        names.clear()
+        tree, *_ = quadtree(device, "two_planes", size, size)
+        launches[len(tree.levels)] = [n for n in names if n.startswith("Cache_")]
+    (short, few), (deep, many) = sorted(launches.items())
+    assert deep == short + 2
+    assert len(many) == len(few) + 4
+    assert many.count("Cache_leaf_errors") == 1 and many.count("Cache_pyramid_errors") == deep - 1
+
+
 def water_filled_shares(budget, weight, cap):
     """Real-valued shares of ``budget`` in proportion to ``weight``, capped."""
     weight = weight.astype(np.float64).copy()

@@ -22,11 +22,22 @@ __kernel void Cache_leaf_keys(const __global int2 *pixels, const int n, const in
     keys[i] = (uint)((p.y >> shift) * leaf_w + (p.x >> shift));
 }
 
-/* Sums of positions and normals and the count of each leaf cell's points. */
+/* A node's mean position and unit mean normal into `means` (two float4 a
+ * node: every level's nodes in one array, the level's first at `at`). */
+inline void Cache_store_mean(float4 psum, float4 nsum, int count, __global float4 *means, int at) {
+    float3 x, n;
+    Cache_node_mean(psum, nsum, count, &x, &n);
+    means[2 * at] = (float4)(x, 0.0f);
+    means[2 * at + 1] = (float4)(n, 0.0f);
+}
+
+/* Sums of positions and normals and the count of each leaf cell's points,
+ * and its means (the leaf level's first node at `first`). */
 __kernel void Cache_leaf_sums(const __global int *start, const __global int *end,
                               const __global int *order, const __global float4 *pos,
                               const __global float4 *nrm, const int cells,
-                              __global float4 *psum, __global float4 *nsum, __global int *count) {
+                              __global float4 *psum, __global float4 *nsum, __global int *count,
+                              __global float4 *means, const int first) {
     int k = Launch_global_id();
     if (k >= cells) return;
     float4 ps = (float4)(0.0f), ns = (float4)(0.0f);
@@ -38,13 +49,15 @@ __kernel void Cache_leaf_sums(const __global int *start, const __global int *end
     psum[k] = ps;
     nsum[k] = ns;
     count[k] = end[k] - start[k];
+    Cache_store_mean(ps, ns, end[k] - start[k], means, first + k);
 }
 
-/* A parent node's sums from its (up to four) children one level below. */
+/* A parent node's sums from its (up to four) children one level below, and
+ * its means (the parent level's first node at `first`). */
 __kernel void Cache_pyramid_sums(const __global float4 *child_psum, const __global float4 *child_nsum,
                                  const __global int *child_count, const int2 child_dims,
                                  __global float4 *psum, __global float4 *nsum, __global int *count,
-                                 const int2 dims) {
+                                 const int2 dims, __global float4 *means, const int first) {
     int k = Launch_global_id();
     if (k >= dims.x * dims.y) return;
     int x = k % dims.x, y = k / dims.x;
@@ -63,43 +76,55 @@ __kernel void Cache_pyramid_sums(const __global float4 *child_psum, const __glob
     psum[k] = ps;
     nsum[k] = ns;
     count[k] = c;
+    Cache_store_mean(ps, ns, c, means, first + k);
 }
 
-/* Per leaf cell: sum of its points' errors to the mean of their ancestor
- * `up` levels higher (in a level of `dims` nodes). */
-__kernel void Cache_leaf_error(const __global int *start, const __global int *end,
-                               const __global int *order, const __global float4 *pos,
-                               const __global float4 *nrm, const int2 leaf_dims,
-                               const __global float4 *psum, const __global float4 *nsum,
-                               const __global int *count, const int2 dims, const int up,
-                               const float alpha, __global float *err) {
+/* Per leaf cell: the sum of its points' errors to the mean of each of its
+ * ancestors, itself included; row `up` (of `cells` values) holds the one
+ * `up` levels higher, rows 0 to `depth`. Levels are root first in `means`,
+ * each (leaf_dims >> up, rounded up) nodes. */
+__kernel void Cache_leaf_errors(const __global int *start, const __global int *end,
+                                const __global int *order, const __global float4 *pos,
+                                const __global float4 *nrm, const int2 leaf_dims, const int depth,
+                                const __global float4 *means, const float alpha, __global float *err) {
     int k = Launch_global_id();
-    if (k >= leaf_dims.x * leaf_dims.y) return;
-    int a = ((k / leaf_dims.x) >> up) * dims.x + ((k % leaf_dims.x) >> up);
-    float3 mx, mn;
-    Cache_node_mean(psum[a], nsum[a], count[a], &mx, &mn);
-    float e = 0.0f;
-    for (int j = start[k]; j < end[k]; ++j) {
-        int i = order[j];
-        e += Cache_eps(alpha, pos[i].xyz, nrm[i].xyz, mx, mn);
-    }
-    err[k] = e;
-}
-
-/* A parent node's error sum from its children's. */
-__kernel void Cache_pyramid_error(const __global float *child_err, const int2 child_dims,
-                                  __global float *err, const int2 dims) {
-    int k = Launch_global_id();
-    if (k >= dims.x * dims.y) return;
-    int x = k % dims.x, y = k / dims.x;
-    float e = 0.0f;
-    for (int dy = 0; dy < 2; ++dy) {
-        for (int dx = 0; dx < 2; ++dx) {
-            int cx = 2 * x + dx, cy = 2 * y + dy;
-            if (cx < child_dims.x && cy < child_dims.y) e += child_err[cy * child_dims.x + cx];
+    int cells = leaf_dims.x * leaf_dims.y;
+    if (k >= cells) return;
+    int kx = k % leaf_dims.x, ky = k / leaf_dims.x;
+    int first = 0; /* the level's first node in means */
+    for (int up = depth; up >= 0; --up) {
+        int2 dims = (leaf_dims + (1 << up) - 1) >> up;
+        int a = first + (ky >> up) * dims.x + (kx >> up);
+        float3 mx = means[2 * a].xyz, mn = means[2 * a + 1].xyz;
+        float e = 0.0f;
+        for (int j = start[k]; j < end[k]; ++j) {
+            int i = order[j];
+            e += Cache_eps(alpha, pos[i].xyz, nrm[i].xyz, mx, mn);
         }
+        err[up * cells + k] = e;
+        first += dims.x * dims.y;
     }
-    err[k] = e;
+}
+
+/* A parent level's error rows from its children's: row r of a node (its
+ * points' errors to the mean of its ancestor r levels up) is the sum of row
+ * r + 1 of its (up to four) children; `rows` rows of dims.x * dims.y. */
+__kernel void Cache_pyramid_errors(const __global float *child_err, const int2 child_dims,
+                                   __global float *err, const int2 dims, const int rows) {
+    int k = Launch_global_id();
+    int cells = dims.x * dims.y, child_cells = child_dims.x * child_dims.y;
+    if (k >= cells) return;
+    int x = k % dims.x, y = k / dims.x;
+    for (int r = 0; r < rows; ++r) {
+        float e = 0.0f;
+        for (int dy = 0; dy < 2; ++dy) {
+            for (int dx = 0; dx < 2; ++dx) {
+                int cx = 2 * x + dx, cy = 2 * y + dy;
+                if (cx < child_dims.x && cy < child_dims.y) e += child_err[(r + 1) * child_cells + cy * child_dims.x + cx];
+            }
+        }
+        err[r * cells + k] = e;
+    }
 }
 
 /* Split a node's seed budget among its children in proportion to their

@@ -31,7 +31,9 @@ class Level:
     psum: cl.Buffer  # float4: summed normalised positions
     nsum: cl.Buffer  # float4: summed normals
     count: cl.Buffer  # int: shading points
-    err: cl.Buffer  # float: summed eps of the points to the node mean
+    # float rows of ``size``: row r the summed eps of the node's points to
+    # the mean of its ancestor r levels up (row 0: its own; rows 0 to the level's index)
+    err: cl.Buffer
     budget: cl.Buffer  # int: seeds handed to the node
 
     @property
@@ -74,10 +76,11 @@ def build(device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: 
     """Node sums, counts and errors of every level for ``n`` shading points
     (float4 normalised positions and normals, int2 pixels)."""
     shift, dims = level_dims(width, height)
+    depth = len(dims) - 1
     levels = [
         Level(d, device.empty(16 * d[0] * d[1]), device.empty(16 * d[0] * d[1]), device.empty(4 * d[0] * d[1]),
-              device.empty(4 * d[0] * d[1]), device.zeros(4 * d[0] * d[1]))
-        for d in dims
+              device.empty(4 * (l + 1) * d[0] * d[1]), device.zeros(4 * d[0] * d[1]))
+        for l, d in enumerate(dims)
     ]
     leaf = levels[-1]
     # group the points by leaf cell
@@ -86,25 +89,25 @@ def build(device: Device, pos: cl.Buffer, nrm: cl.Buffer, pixels: cl.Buffer, n: 
                                   np.int32(leaf.dims[0]), keys)
     leaves = group(device, keys, n, leaf.size)
     members = (leaves.start, leaves.end, leaves.order, pos, nrm)
-    # sums, leaves first, then each parent from its children
+    # sums and means, leaves first, then each parent from its children (the
+    # means of every level in one array, root first)
+    firsts = np.concatenate(([0], np.cumsum([lv.size for lv in levels]))).astype(np.int32)
+    means = device.empty(32 * int(firsts[-1]))
     _k(device, "Cache_leaf_sums")(leaf.size, *members, np.int32(leaf.size),
-                                  leaf.psum, leaf.nsum, leaf.count)
+                                  leaf.psum, leaf.nsum, leaf.count, means, firsts[depth])
     pyramid = _k(device, "Cache_pyramid_sums")
-    for parent, child in zip(levels[-2::-1], levels[:0:-1]):
+    for l in range(depth - 1, -1, -1):
+        parent, child = levels[l], levels[l + 1]
         pyramid(parent.size, child.psum, child.nsum, child.count, _dims2(child.dims),
-                parent.psum, parent.nsum, parent.count, _dims2(parent.dims))
-    # errors: per level, each leaf's points against their ancestor's mean, summed upwards
-    scratch = [device.empty(4 * lv.size) for lv in levels]
-    leaf_error, pyramid_error = _k(device, "Cache_leaf_error"), _k(device, "Cache_pyramid_error")
-    depth = len(levels) - 1
-    for l, lv in enumerate(levels):
-        out = lv.err if l == depth else scratch[depth]
-        leaf_error(leaf.size, *members, _dims2(leaf.dims), lv.psum, lv.nsum, lv.count,
-                   _dims2(lv.dims), np.int32(depth - l), np.float32(alpha), out)
-        for m in range(depth - 1, l - 1, -1):
-            out = lv.err if m == l else scratch[m]
-            pyramid_error(levels[m].size, scratch[m + 1], _dims2(levels[m + 1].dims),
-                          out, _dims2(levels[m].dims))
+                parent.psum, parent.nsum, parent.count, _dims2(parent.dims), means, firsts[l])
+    # errors: each leaf's points against every ancestor's mean in one pass,
+    # then summed upwards level by level, every ancestor's row at once
+    _k(device, "Cache_leaf_errors")(leaf.size, *members, _dims2(leaf.dims), np.int32(depth), means,
+                                    np.float32(alpha), leaf.err)
+    pyramid_errors = _k(device, "Cache_pyramid_errors")
+    for l in range(depth - 1, -1, -1):
+        parent, child = levels[l], levels[l + 1]
+        pyramid_errors(parent.size, child.err, _dims2(child.dims), parent.err, _dims2(parent.dims), np.int32(l + 1))
     return QuadTree(levels=levels, leaves=leaves, leaf_shift=shift)
 
 
