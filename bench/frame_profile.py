@@ -2,6 +2,7 @@
 and allocations, per module of gpu_core, without Blender.
 
     python bench/frame_profile.py [--device gpu] [--scene cornell_box] [--preset preview] [--size 256] [--gpu-paths]
+                                  [--orbit DEGREES]
 
 Renders a snapshot of ``bench/frame_snapshot.py save`` (``.cache/snapshots/``)
 through gpu_core's Renderer on a queue with profiling on: one warm-up
@@ -21,6 +22,11 @@ own time is a small part of the wall, the frame is launch- and read-bound.
 ``--gpu-paths`` makes gpu_core take a GPU's paths on any device (the
 kd-tree built level by level, small point trees by a work-group, no leaf
 blocks), so that a CPU counts the launches and reads a GPU frame makes.
+``--orbit DEGREES`` profiles what the viewport's commonest edit costs
+instead: one renderer renders the view, then the view turned DEGREES about
+the vertical axis through the scene's centre (measured), as a held
+renderer does after an orbit (the kd-tree, photon maps and cut kept, the
+cache records of the view before reused where they cover).
 Writes bench/results/frame_profile[_TAG].json and .txt.
 """
 
@@ -145,6 +151,19 @@ def profiling_device(spec: str | None) -> Device:
     return Device(context=plain.context, queue=queue, device=plain.device)
 
 
+def orbited(scene, degrees: float):
+    """The scene with its camera turned ``degrees`` about the vertical (z)
+    axis through the centre of its triangles' box, as the viewport's orbit."""
+    lo, hi = scene.triangles.reshape(-1, 3).min(axis=0), scene.triangles.reshape(-1, 3).max(axis=0)
+    a = np.radians(degrees)
+    turn = np.eye(4)
+    turn[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    to_center, back = np.eye(4), np.eye(4)
+    to_center[:3, 3], back[:3, 3] = -(lo + hi) / 2, (lo + hi) / 2
+    camera = replace(scene.camera, matrix=back @ turn @ to_center @ np.asarray(scene.camera.matrix, np.float64))
+    return replace(scene, camera=camera)
+
+
 def table(rows: dict) -> str:
     """Per-module rows, the costliest first."""
     columns = ("launches", "launch_ms", "kernel_ms", "idle_before_ms", "reads", "read_wait_ms", "queued_reads",
@@ -172,6 +191,9 @@ def main() -> int:
                         help="take the paths a GPU takes (the kd-tree built level by level, small point trees by "
                              "a work-group, no leaf blocks) on any device, to count what a GPU frame launches and "
                              "reads back without one")
+    parser.add_argument("--orbit", type=float, default=None, metavar="DEGREES",
+                        help="profile a held renderer's frame after the view turned this much about the vertical "
+                             "axis (the viewport's orbit), not a fresh renderer's first frame")
     args = parser.parse_args()
     if args.gpu_paths:
         Device.is_cpu = property(lambda device: False)
@@ -181,12 +203,16 @@ def main() -> int:
     device = profiling_device(args.device)
     about = describe(device)
     Renderer(device).render(scene, settings)  # warm-up: programs built, launch shapes seen
+    renderer, measured = Renderer(device), scene
+    if args.orbit is not None:  # the view before the orbit, rendered by the renderer measured
+        renderer.render(scene, settings)
+        measured = orbited(scene, args.orbit)
 
     profile = Profile()
     profile.install()
     profile.active = True
     began = time.perf_counter()
-    result = Renderer(device).render(scene, settings)
+    result = renderer.render(measured, settings)
     wall_ms = (time.perf_counter() - began) * 1e3
     profile.active = False
     device.queue.finish()
@@ -196,6 +222,7 @@ def main() -> int:
     kernel_ms = sum(per_kernel.values())
     idle_ms = sum(row["idle_before_ms"] for row in profile.rows.values())
     paths = ", the GPU's paths" if args.gpu_paths else ""
+    paths += f", after an orbit of {args.orbit:g} degrees" if args.orbit is not None else ""
     lines = [about, f"{args.scene} {args.size} {args.preset}{paths}, no denoiser: render call {wall_ms:.1f} ms; "
              f"our kernels' own device time {kernel_ms:.1f} ms, the device idle between them {idle_ms:.1f} ms",
              "stages (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in result.stats["ms"].items()),
@@ -208,7 +235,8 @@ def main() -> int:
     with open(name + ".txt", "w") as f:
         f.write(text + "\n")
     with open(name + ".json", "w") as f:
-        json.dump(dict(machine=about, scene=args.scene, size=args.size, preset=args.preset, wall_ms=wall_ms,
+        json.dump(dict(machine=about, scene=args.scene, size=args.size, preset=args.preset, orbit=args.orbit,
+                       gpu_paths=args.gpu_paths, wall_ms=wall_ms,
                        stages=result.stats["ms"], modules=rows, kernels=per_kernel), f, indent=1)
     return 0
 
