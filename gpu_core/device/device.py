@@ -76,6 +76,10 @@ class Device:
         return bool(self.device.type & cl.device_type.CPU)
 
     @property
+    def compute_units(self) -> int:
+        return int(self.device.max_compute_units)
+
+    @property
     def max_alloc_bytes(self) -> int:
         return int(self.device.max_mem_alloc_size)
 

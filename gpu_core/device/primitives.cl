@@ -11,6 +11,7 @@
 
 #define PRIM_CHUNK 256
 #define PRIM_RADIX (1 << PRIM_RADIX_BITS)
+#define PRIM_SORT_GROUP 256 /* work-items of Prim_radix_sort_group at most */
 
 /* ---- prefix sums of int, long and int8 ---------------------------------
  * Exclusive (or inclusive) prefix sums, in place allowed; the total goes to
@@ -193,6 +194,64 @@ __kernel void Prim_radix_scatter(const __global uint *keys, const __global int *
         int at = slot[(key >> shift) & (PRIM_RADIX - 1)]++;
         keys_out[at] = key;
         values_out[at] = values[i];
+    }
+}
+
+/* The whole stable radix sort of a short array by one work-group (of up
+ * to PRIM_SORT_GROUP work-items; one on a CPU device): `passes` passes of
+ * PRIM_RADIX_BITS, each work-item owning a run of consecutive elements as a
+ * chunk above, the digit table in local memory, so that the sort is one
+ * launch where the chunked one is three a pass. Pass p reads what pass
+ * p - 1 wrote (the input first) and writes the pair of outputs p % 2; the
+ * values are the elements' indices where `indices` is set. The same order
+ * as the chunked sort (a stable sort has one result). */
+__kernel void Prim_radix_sort_group(const __global uint *keys, const __global int *values, const int indices,
+                                    const int n, const int passes, __global uint *keys0, __global int *values0,
+                                    __global uint *keys1, __global int *values1) {
+    __local int table[PRIM_RADIX * PRIM_SORT_GROUP], partial[PRIM_SORT_GROUP];
+    int t = get_local_id(0), size = get_local_size(0);
+    int run = (n + size - 1) / size, lo = min(t * run, n), hi = min(lo + run, n);
+    for (int p = 0; p < passes; ++p) {
+        const __global uint *k_in = p == 0 ? keys : (p % 2 ? keys0 : keys1);
+        const __global int *v_in = p == 0 ? values : (p % 2 ? values0 : values1);
+        __global uint *k_out = p % 2 ? keys1 : keys0;
+        __global int *v_out = p % 2 ? values1 : values0;
+        int shift = p * PRIM_RADIX_BITS, slot[PRIM_RADIX];
+        for (int d = 0; d < PRIM_RADIX; ++d) slot[d] = 0;
+        for (int i = lo; i < hi; ++i) slot[(k_in[i] >> shift) & (PRIM_RADIX - 1)]++;
+        for (int d = 0; d < PRIM_RADIX; ++d) table[d * size + t] = slot[d];
+        barrier(CLK_LOCAL_MEM_FENCE);
+        /* digit-major exclusive prefix sums (each digit's runs in work-item
+         * order): each work-item scans PRIM_RADIX entries of the table,
+         * their sums are scanned, then added back */
+        int base = t * PRIM_RADIX, sum = 0;
+        for (int j = base; j < base + PRIM_RADIX; ++j) {
+            int c = table[j];
+            table[j] = sum;
+            sum += c;
+        }
+        partial[t] = sum;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (t == 0) {
+            int run_sum = 0;
+            for (int j = 0; j < size; ++j) {
+                int c = partial[j];
+                partial[j] = run_sum;
+                run_sum += c;
+            }
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+        for (int j = base; j < base + PRIM_RADIX; ++j) table[j] += partial[t];
+        barrier(CLK_LOCAL_MEM_FENCE);
+        for (int d = 0; d < PRIM_RADIX; ++d) slot[d] = table[d * size + t];
+        for (int i = lo; i < hi; ++i) {
+            uint key = k_in[i];
+            int at = slot[(key >> shift) & (PRIM_RADIX - 1)]++;
+            k_out[at] = key;
+            v_out[at] = p == 0 && indices ? i : v_in[i];
+        }
+        /* this pass's output complete before the next reads it */
+        barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
     }
 }
 

@@ -138,7 +138,7 @@ def gather_range(device: Device, job: GatherJob, first: int, end: int, out: Gath
         trace(n, *job.scene_args, *job.cut_args, job.positions, job.normals, i32(start), i32(count), i32(job.strata),
               i32(job.max_specular), np.uint32(job.seed & 0xFFFFFFFF), np.float32(job.extent), cells, distances,
               *lookups, keys)
-        _, in_order = primitives.sort_pairs(device, keys, primitives.iota(device, n), n, 1 << (3 * KEY_BITS))
+        _, in_order = primitives.sort_pairs(device, keys, None, n, 1 << (3 * KEY_BITS))
         lookup(n, *job.cut_args, in_order, i32(n), *lookups, cells)
         reduce(count, job.normals, i32(start), i32(count), i32(job.strata), cells, distances, out.e, out.distance,
                out.hits, out.gradient)

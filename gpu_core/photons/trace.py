@@ -180,7 +180,7 @@ def _first_capacity(n: int, pass_id: int, stride: int, sample) -> int:
 def _in_key_order(device: Device, stored: list, keys, count: int, key_bound: int, scene_defines) -> list:
     """The stored photons sorted by key: the order of the paths that stored
     them, whatever order the device ran them in."""
-    _, order = primitives.sort_pairs(device, keys, primitives.iota(device, count), count, key_bound)
+    _, order = primitives.sort_pairs(device, keys, None, count, key_bound)
     out = [device.array(max(count, 1) * 4, np.float32).reshape(max(count, 1), 4) for _ in range(4)]
     device.kernel(_PROGRAM, "Photon_reorder", scene_defines)(count, order, np.int32(count), *(a.data for a in stored),
                                               *(a.data for a in out))

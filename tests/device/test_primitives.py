@@ -51,6 +51,46 @@ def test_grouping_equals_a_stable_numpy_sort(device, n, key_count):
     np.testing.assert_array_equal(start[filled], np.searchsorted(np.sort(keys), np.flatnonzero(filled)))
 
 
+@pytest.mark.parametrize("gpu_group", [False, True])
+@pytest.mark.parametrize("n, key_bound", [(2, 2), (63, 1 << 5), (64, 1 << 9), (65, 3), (1000, 1 << 10),
+                                          (5000, 1 << 16), (32768, 1 << 20), (70000, 1 << 20)])
+def test_a_short_sort_is_one_launch_of_one_work_group_with_the_chunked_sort_s_order(device, monkeypatch, n, key_bound,
+                                                                                   gpu_group):
+    """A sort by one work-group is one launch (of one work-item on a CPU
+    device, of the kernel's local size on a GPU: both run here), with the
+    stable order the chunked sort gives, given values or indices."""
+    from gpu_core.device.kernels import Kernel
+    if gpu_group:
+        monkeypatch.setattr(type(device), "is_cpu", property(lambda self: False))
+    rng = np.random.default_rng(n)
+    keys = rng.integers(0, key_bound, n).astype(np.uint32)
+    values = rng.integers(-1000, 1000, n).astype(np.int32)
+    chunked = primitives.sort_pairs(device, device.to_device(keys), device.to_device(values), n, key_bound, group_max=0)
+    names = []
+    launch, groups = Kernel.__call__, Kernel.groups
+    monkeypatch.setattr(Kernel, "__call__", lambda self, *a: (names.append(self.name), launch(self, *a))[1])
+    monkeypatch.setattr(Kernel, "groups", lambda self, *a: (names.append(self.name), groups(self, *a))[1])
+    given = primitives.sort_pairs(device, device.to_device(keys), device.to_device(values), n, key_bound, group_max=n)
+    indexed = primitives.sort_pairs(device, device.to_device(keys), None, n, key_bound, group_max=n)
+    assert names == ["Prim_radix_sort_group"] * 2
+    order = np.argsort(keys, kind="stable")
+    for got_keys, got_values, want in ((*chunked, values[order]), (*given, values[order]), (*indexed, order)):
+        np.testing.assert_array_equal(read(device, got_keys, n, np.uint32), keys[order])
+        np.testing.assert_array_equal(read(device, got_values, n), want)
+
+
+def test_a_cpu_device_sorts_more_pairs_by_one_work_item_the_fewer_its_cores_and_a_gpu_short_arrays_only(device,
+                                                                                                      monkeypatch):
+    monkeypatch.setattr(type(device), "is_cpu", property(lambda self: True))
+    bounds = []
+    for cores in (2, 16):
+        monkeypatch.setattr(type(device), "compute_units", property(lambda self, c=cores: c))
+        bounds.append(primitives.sort_group_max(device))
+    assert bounds[0] > bounds[1] >= primitives.SORT_GPU_MAX
+    monkeypatch.setattr(type(device), "is_cpu", property(lambda self: False))
+    assert primitives.sort_group_max(device) == primitives.SORT_GPU_MAX
+
+
 def test_a_kernel_typed_on_its_first_launch_takes_any_integer_after(device):
     """The launch helper declares a kernel's scalar types from its first
     launch (numpy scalars); later launches may pass Python or other numpy ints."""
