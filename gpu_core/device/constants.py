@@ -78,8 +78,10 @@ PHOTON_FILTER_BOX = 0
 PHOTON_FILTER_CONE = 1
 PHOTON_FILTER_EPANECHNIKOV = 2
 
-# stable radix sort of the device primitives: bits per pass
+# stable radix sort of the device primitives: bits per pass, and the most work-items of the
+# one-work-group sort (its digit table in local memory)
 PRIM_RADIX_BITS = 4
+PRIM_SORT_GROUP = 256
 
 
 def defines() -> dict[str, int | str]:

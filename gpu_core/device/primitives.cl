@@ -11,7 +11,6 @@
 
 #define PRIM_CHUNK 256
 #define PRIM_RADIX (1 << PRIM_RADIX_BITS)
-#define PRIM_SORT_GROUP 256 /* work-items of Prim_radix_sort_group at most */
 
 /* ---- prefix sums of int, long and int8 ---------------------------------
  * Exclusive (or inclusive) prefix sums, in place allowed; the total goes to

@@ -24,7 +24,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 from pyopencl import cltypes
 
-from .constants import PRIM_RADIX_BITS
+from .constants import PRIM_RADIX_BITS, PRIM_SORT_GROUP
 from .device import Device
 
 _PROGRAM = "device/primitives.cl"
@@ -239,8 +239,9 @@ def sort_pairs(device: Device, keys: cl.Buffer, values: cl.Buffer | None, n: int
     spare = [(device.empty(4 * n), device.empty(4 * n)), (device.empty(4 * n), device.empty(4 * n))]
     if n <= (sort_group_max(device) if group_max is None else group_max):
         kernel = _k(device, "Prim_radix_sort_group")
-        kernel.groups(1, 1 if device.is_cpu else kernel.local, keys, values, np.int32(values is None), np.int32(n),
-                      np.int32(passes), *spare[0], *spare[1])
+        group = 1 if device.is_cpu else min(kernel.local, PRIM_SORT_GROUP)
+        kernel.groups(1, group, keys, values, np.int32(values is None), np.int32(n), np.int32(passes), *spare[0],
+                      *spare[1])
         return spare[(passes - 1) % 2]
     values = iota(device, n) if values is None else values
     chunks = _chunks(n)
