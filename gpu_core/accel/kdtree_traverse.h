@@ -7,6 +7,7 @@
 #define GPUGI_KDTREE_TRAVERSE_H
 #include "accel/kdtree.h"
 #include "device/axis.h"
+#include "device/inline.h"
 
 /* Relative rounding error allowed for in the ray's distances to planes. */
 #define KD_T_SLACK 1.0e-6f
@@ -81,8 +82,8 @@ inline float KdTree_lane(float4 v, int lane) { return lane == 0 ? v.x : (lane ==
  * (the lowest lane on a tie, as the leaf list's order would have it), or
  * with any_hit the lowest lane hit (the list's first), its t and
  * barycentrics; -1 when none is. */
-inline int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin, float tmax, bool any_hit, float *t,
-                        float *u, float *v) {
+GPUGI_HOT_INLINE int KdTree_block(const KdRay *ray, const __global float4 *blk, float tmin, float tmax, bool any_hit,
+                                  float *t, float *u, float *v) {
 #pragma OPENCL FP_CONTRACT OFF
     /* corners relative to the ray origin, coordinate by coordinate */
     float4 ox = (float4)(ray->org.x), oy = (float4)(ray->org.y), oz = (float4)(ray->org.z);

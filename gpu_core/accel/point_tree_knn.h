@@ -10,6 +10,7 @@
 #define GPUGI_POINT_TREE_KNN_H
 #include "accel/point_tree.h"
 #include "device/axis.h"
+#include "device/inline.h"
 
 #ifndef KNN_K
 #error "KNN_K must be defined"
@@ -74,7 +75,7 @@ inline void Knn_heapify(Knn *h, int n) {
 }
 
 /* Add a candidate closer than h->worst. */
-inline void Knn_push(Knn *h, float d2, int id) {
+GPUGI_HOT_INLINE void Knn_push(Knn *h, float d2, int id) {
     if (h->n < Knn_wanted(h)) {
         h->key[h->n] = Knn_key(d2, id);
         if (++h->n < Knn_wanted(h)) return;

@@ -15,6 +15,8 @@
  * function), so kernels keep calling dot, fmax, length. */
 #ifndef GPUGI_POCL_BUILTINS_H
 #define GPUGI_POCL_BUILTINS_H
+/* helpers a hot loop calls, inlined where they are called (device/inline.h) */
+#define GPUGI_HOT_INLINE inline __attribute__((always_inline))
 /* only where the compiler has the elementwise builtins (Clang 14 and
  * later): an older PoCL keeps its library calls */
 #if defined(__has_builtin) && __has_builtin(__builtin_elementwise_max) && __has_builtin(__builtin_elementwise_abs)
