@@ -42,7 +42,7 @@ from .accel.kdtree_overlay import OVERLAY_SHARE
 from .accel.point_tree import PointTree
 from .device import Device
 from .device.programs import compile_helpers, device_spec, start_helper, stop_helper
-from .gi import cut, shading_points
+from .gi import caustics, cut, shading_points
 from .gi.cache import interpolation, neighbours, samples
 from .gi.pipeline import GiField
 from .image import render_image
@@ -149,7 +149,8 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
     its image over an empty GI field (no cache point anywhere; not where
     glossy paths read the cut, which needs the maps), the cache points'
     neighbour checks and interpolation over dark stand-in records, and the
-    caustic estimate over a stand-in map (a photon at each shading point)."""
+    caustic estimates over a stand-in map (a photon at each shading point:
+    on the grid, as caustics seen directly, and at points, as the cut's nodes)."""
     settings = settings.validated()
     if settings.mode != "gi":
         return
@@ -176,6 +177,7 @@ def stages_ahead(device: Device, scene: Scene, settings: RenderSettings) -> None
     if points.count and "caustics" in the_plan.stages:
         pos, nrm = points.positions, points.normals
         stand_in = PointTree.build(device, pos, np.full_like(pos, 1e-3), nrm, nrm, k_hint=settings.photon_k)
+        caustics.irradiance(stand_in, points, settings.caustic_k)
         cut.caustic_irradiance(stand_in, points.pos, points.nrm, points.count, settings.caustic_k,
                                device.empty(16 * points.count))
 

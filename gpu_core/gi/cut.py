@@ -141,13 +141,18 @@ def with_caustics(cut: Cut, caustic_map: PointTree | None, k: int) -> Cut:
     return replace(cut, irradiance=total, stats={**cut.stats, "caustics_in_nodes": True})
 
 
+def caustic_max_radius(caustic_map: PointTree) -> float | None:
+    """How far caustic estimates gather: CAUSTIC_REACH times the map's
+    typical radius (None, unbounded, where the map has none)."""
+    radius = caustic_map.radius
+    return CAUSTIC_REACH * radius if np.isfinite(radius) and radius > 0 else None
+
+
 def caustic_irradiance(caustic_map: PointTree, positions: cl.Buffer, normals: cl.Buffer, n: int, k: int,
                        out: cl.Buffer) -> None:
     """The caustic map's ``k``-photon irradiance at ``n`` device points,
-    gathered within CAUSTIC_REACH times the map's typical radius."""
-    radius = caustic_map.radius
-    reach = CAUSTIC_REACH * radius if np.isfinite(radius) and radius > 0 else None
-    caustic_map.irradiance_on_device(positions, normals, n, k, out, max_radius=reach)
+    gathered within caustic_max_radius."""
+    caustic_map.irradiance_on_device(positions, normals, n, k, out, max_radius=caustic_max_radius(caustic_map))
 
 
 def select(device: Device, tree: PointTree, k: int, delta: float = DELTA, max_rounds: int = MAX_ROUNDS) -> Cut:

@@ -8,7 +8,8 @@ global photon tree, its nodes also carrying the caustic map's light; final
 gathering at the sample points through the cut;
 lone outliers and the samples' distances clamped by their neighbours';
 Ward interpolation to every shading point; caustics
-by density estimation of the caustic map at the shading points. Each stage
+by density estimation of the caustic map on the shading points' grid
+(``caustics``). Each stage
 reads the buffers the stage before wrote; the image kernel then reads the
 irradiance back at its camera paths' first diffuse hits through the
 shading-point grid (``GiField``).
@@ -29,7 +30,7 @@ from ..errors import check_stop
 from ..photons.trace import PhotonMaps
 from ..scene.upload import SceneBuffers
 from ..settings import RenderSettings
-from . import cut, gather, shading_points
+from . import caustics, cut, gather, shading_points
 from .cache import interpolation, neighbours, samples
 
 
@@ -107,9 +108,7 @@ def render_gi(device: Device, buffers: SceneBuffers, window: tuple[int, int, int
     if "caustics" in stages and n:
         say("caustics")
         with timer.stage("caustics"):
-            estimate = device.empty(16 * n)
-            cut.caustic_irradiance(maps.caustic_map, points.pos, points.nrm, n, settings.caustic_k, estimate)
-            caustic = points.scatter(estimate)
+            caustic = caustics.irradiance(maps.caustic_map, points, settings.caustic_k)
     zeros = device.zeros(16 * points.grid_size) if indirect is None or caustic is None else None
     # glossy paths read the diffuse light where they land from the cut
     glossy_cut = _cut(device, maps, settings)[1] if "glossy_cut" in stages else None
@@ -220,5 +219,6 @@ def programs(device: Device, settings: RenderSettings, stages: list[str], scene_
         wanted += gather.programs(scene_defines) + neighbours.programs()
         wanted += interpolation.programs()
     if "caustics" in stages:
-        wanted += query_programs(settings.caustic_k)  # the caustic map's estimates, seen directly and in the cut
+        wanted += caustics.programs(settings.caustic_k)  # the caustic map's estimates seen directly
+        wanted += query_programs(settings.caustic_k)  # and in the cut's nodes
     return wanted
