@@ -5,6 +5,7 @@ them only where the estimate is smooth."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gpu_core.accel.point_tree import PointTree
 from gpu_core.device.layout import float4_rows
@@ -58,6 +59,47 @@ def estimates(device, tree, points):
     return grid.reshape(shape), exact.reshape(shape)
 
 
+def interpolated_within_own_changes(grid, exact):
+    """The share of slots interpolated (not their own estimate), once
+    checked that each departs from its own estimate by less than that
+    estimate changes from one pixel to the next (photons entering and
+    leaving its k): on average by less than half of it, at most by its
+    largest change."""
+    interpolated = ~np.isclose(grid, exact, rtol=1e-6).all(axis=2)
+    deviation = (np.abs(grid - exact) / exact).max(axis=2)
+    step = np.abs(np.diff(exact[..., 0], axis=1)) / exact[:, 1:, 0]
+    assert deviation[interpolated].mean() < 0.5 * step.mean()
+    assert deviation.max() < step.max()
+    return interpolated.mean()
+
+
+def scaled_estimates(device, scale, offset):
+    """estimates() of sparse photons (a 16-photon radius of about 0.4) and a
+    grid over them (pixels 0.03 apart), both scaled by ``scale`` and moved by
+    ``offset``, the power scaled with the area (the irradiance the unit's)."""
+    rng = np.random.default_rng(4)
+    pts, power, normal = photons_on_floor(rng, 300, 2.0, 1.0)
+    tree = tree_of(device, pts * np.float32(scale) + np.float32(offset), power * np.float32(scale**2), normal)
+    points = floor_grid(device, 61, 53, 0.8)
+    pos = device.read(points.grid_pos, (points.grid_size, 4), np.float32)
+    pos[:, :3] = pos[:, :3] * np.float32(scale) + np.float32(offset)
+    points.grid_pos = device.to_device(pos)
+    return estimates(device, tree, points)
+
+
+@pytest.mark.parametrize("scale, offset", [(1e-3, 0.0), (1e4, 0.0), (1.0, 1e5)])
+def test_tiny_huge_and_distant_grids_interpolate_like_the_unit_grid(device, scale, offset):
+    unit_grid, unit_exact = scaled_estimates(device, 1.0, 0.0)
+    grid, exact = scaled_estimates(device, scale, offset)
+    assert np.isfinite(grid).all()
+    share = interpolated_within_own_changes(grid, exact)
+    assert abs(share - interpolated_within_own_changes(unit_grid, unit_exact)) < 0.05
+    if offset:  # float32 positions 1e5 m out move by millimetres: a few estimates take another photon
+        assert abs(grid.mean() / unit_grid.mean() - 1.0) < 0.01
+    else:
+        np.testing.assert_allclose(grid, unit_grid, rtol=1e-3)
+
+
 def test_with_no_span_every_slot_takes_its_own_estimate(device, monkeypatch):
     rng = np.random.default_rng(3)
     tree = tree_of(device, *photons_on_floor(rng, 300, 2.0, 1.0))
@@ -67,26 +109,17 @@ def test_with_no_span_every_slot_takes_its_own_estimate(device, monkeypatch):
 
 
 def test_sparse_photons_are_interpolated_within_the_estimates_own_changes(device):
-    rng = np.random.default_rng(4)
-    tree = tree_of(device, *photons_on_floor(rng, 300, 2.0, 1.0))  # a 16-photon radius of about 0.4
-    grid, exact = estimates(device, tree, floor_grid(device, 61, 53, 0.8))  # pixels 0.03 apart
+    grid, exact = scaled_estimates(device, 1.0, 0.0)
     anchors = np.zeros(grid.shape[:2], bool)
     anchors[::caustics.ANCHOR_SPACING, ::caustics.ANCHOR_SPACING] = True
     np.testing.assert_allclose(grid[anchors], exact[anchors], rtol=1e-6)
-    interpolated = ~np.isclose(grid, exact, rtol=1e-6).all(axis=2)
-    assert interpolated.mean() > 0.5  # most slots between anchors take their mean
-    # the mean departs from a slot's own estimate by less than that estimate
-    # changes from one pixel to the next (photons entering and leaving its k)
-    deviation = (np.abs(grid - exact) / exact).max(axis=2)
-    step = np.abs(np.diff(exact[..., 0], axis=1)) / exact[:, 1:, 0]
-    assert deviation[interpolated].mean() < 0.5 * step.mean()
-    assert deviation.max() < step.max()
+    assert interpolated_within_own_changes(grid, exact) > 0.5  # most slots between anchors take their mean
 
 
 def test_a_sharp_caustic_keeps_every_slots_own_estimate(device):
     rng = np.random.default_rng(5)
     tree = tree_of(device, *photons_on_floor(rng, 20000, 50.0, 0.05))  # a bright spot 0.1 wide
-    grid, exact = estimates(device, tree, floor_grid(device, 63, 63, 0.1))  # 3 mm apart, the radius about 1
+    grid, exact = estimates(device, tree, floor_grid(device, 63, 63, 0.1))  # pixels 3 mm apart, the spot's radius 1.6 mm
     xs = np.linspace(-0.1, 0.1, 63)
     spot = (np.abs(xs)[None, :] < 0.045) & (np.abs(xs)[:, None] < 0.045)
     np.testing.assert_allclose(grid[spot], exact[spot], rtol=1e-6)
