@@ -615,11 +615,20 @@ inline float Image_noise(float4 combined, float4 even) {
     return (d.x + d.y + d.z) / (0.0001f + normalise);
 }
 
+/* The noise of each pixel that took samples in the round just done
+ * (`active`): a pixel's noise changes only when it takes samples. */
+__kernel void Image_noise_of(const ImageJob job, const __global float4 *combined, const __global float4 *adaptive,
+                             const __global int *active, __global float *noise) {
+    int o = Launch_global_id();
+    if (o >= job.window.x * job.window.y || !active[o]) return;
+    noise[o] = Image_noise(combined[o], adaptive[o]);
+}
+
 /* The pixels of the window that take the next round: those below
  * job.sample_limit samples whose own noise, or a neighbour's (3 x 3), is
  * at least `threshold`, so that noisy regions keep their rims sampled;
  * counter[0] counts them. One work item per pixel of the window, in rows. */
-__kernel void Image_adaptive_active(const ImageJob job, const __global float4 *combined,
+__kernel void Image_adaptive_active(const ImageJob job, const __global float *noise,
                                     const __global float4 *adaptive, const float threshold, __global int *active,
                                     volatile __global int *counter) {
     int o = Launch_global_id();
@@ -631,8 +640,7 @@ __kernel void Image_adaptive_active(const ImageJob job, const __global float4 *c
         for (int dx = -1; dx <= 1; ++dx) {
             int nx = x + dx, ny = y + dy;
             if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
-            int n = ny * w + nx;
-            noisy = noisy || !(Image_noise(combined[n], adaptive[n]) < threshold);
+            noisy = noisy || !(noise[ny * w + nx] < threshold);
         }
     }
     bool take = noisy && (int)adaptive[o].w < job.sample_limit;

@@ -89,9 +89,10 @@ def adaptive_rounds(settings: RenderSettings) -> tuple[int, int] | None:
 @dataclass
 class ImageFilm:
     """The device buffers of a render window's passes, and per pixel its
-    even samples' mean with its sample count (``counts``) and whether it
-    takes the next round (``active``), kept where the samples come in
-    rounds: adaptive sampling, or passes that continue the film."""
+    even samples' mean with its sample count (``counts``), whether it
+    takes the next round (``active``) and its noise when it last took
+    samples (``noise``), kept where the samples come in rounds: adaptive
+    sampling, or passes that continue the film."""
 
     size: tuple[int, int]  # width, height
     combined: cl.Buffer
@@ -102,6 +103,7 @@ class ImageFilm:
     feature_normal: cl.Buffer
     counts: cl.Buffer  # float4 per pixel (even samples' mean, count) where counted, else a stand-in
     active: cl.Buffer  # int per pixel where counted, else a stand-in
+    noise: cl.Buffer  # float per pixel where counted: its noise when it last took samples, else a stand-in
     counted: bool
     sample_start: int  # the number of every pixel's first camera path
     samples: int = 0  # the rounds' samples so far: what a pixel that never sat one out has
@@ -117,11 +119,12 @@ class ImageFilm:
         total = size[0] * size[1]
         light = device.empty(total * 16 * len(LIGHT_PASSES) if settings.light_passes else 16)
         albedo, feature_normal = (device.empty(total * 16 if settings.denoising_passes else 16) for _ in range(2))
-        counts, active = (device.zeros(total * 16), device.empty(total * 4)) if counted else (device.empty(16),) * 2
+        counts, active, noise = ((device.zeros(total * 16), device.empty(total * 4), device.empty(total * 4))
+                                 if counted else (device.empty(16),) * 3)
         if counted:
             device.fill(active, 1, total * 4)
         return cls(size, device.empty(total * 16), device.empty(total * 4), device.empty(total * 16), light, albedo,
-                   feature_normal, counts, active, counted, sample_start)
+                   feature_normal, counts, active, noise, counted, sample_start)
 
     def buffers(self) -> list:
         """The kernel's output arguments, in Image_pixels' order."""
@@ -271,10 +274,13 @@ def _round_limit(settings: RenderSettings, rounds: tuple[int, int] | None) -> in
 
 
 def _next_round(device: Device, defines: dict, job, film: ImageFilm, threshold: float, total: int) -> int:
-    """Flag the pixels of the next round (Image_adaptive_active); how many there are."""
+    """Flag the pixels of the next round (Image_adaptive_active), once the
+    pixels of the round just done have their noise (Image_noise_of); how
+    many there are."""
     counter = device.zeros(4)
+    device.kernel(PROGRAM, "Image_noise_of", defines)(total, job, film.combined, film.counts, film.active, film.noise)
     device.kernel(PROGRAM, "Image_adaptive_active", defines)(
-        total, job, film.combined, film.counts, np.float32(NOISE_SCALE * threshold), film.active, counter)
+        total, job, film.noise, film.counts, np.float32(NOISE_SCALE * threshold), film.active, counter)
     return int(device.read(counter, 1, np.int32)[0])
 
 

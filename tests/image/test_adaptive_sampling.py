@@ -18,7 +18,7 @@ from gpu_core.settings import RenderSettings
 SIZE = 32
 
 
-def noise(combined, even):
+def noise_of(combined, even):
     """Cycles' per-pixel noise, on the host."""
     intensity = combined.sum()
     normalise = np.sqrt(intensity) if intensity < 1.0 else intensity
@@ -26,8 +26,8 @@ def noise(combined, even):
 
 
 def active_after(device, combined, even, counts, threshold, limit):
-    """Image_adaptive_active over a window of per-pixel means (h, w, 3):
-    the flags and the counter."""
+    """Image_noise_of (every pixel just sampled), then Image_adaptive_active,
+    over a window of per-pixel means (h, w, 3): the flags and the counter."""
     h, w = combined.shape[:2]
     job = np.zeros(1, IMAGE_JOB_DTYPE)
     job["window"] = (w, h, w * h, 0)
@@ -35,8 +35,10 @@ def active_after(device, combined, even, counts, threshold, limit):
     rows = lambda rgb, wv: np.concatenate([rgb, wv[..., None]], -1).reshape(-1, 4).astype(np.float32)
     comb = device.to_device(rows(combined, np.ones((h, w))))
     film = device.to_device(rows(even, counts.astype(np.float64)))
-    active, counter = device.empty(4 * w * h), device.zeros(4)
-    device.kernel("image.cl", "Image_adaptive_active", {})(w * h, job, comb, film, np.float32(threshold), active,
+    active, noise, counter = device.empty(4 * w * h), device.empty(4 * w * h), device.zeros(4)
+    device.fill(active, 1, 4 * w * h)
+    device.kernel("image.cl", "Image_noise_of", {})(w * h, job, comb, film, active, noise)
+    device.kernel("image.cl", "Image_adaptive_active", {})(w * h, job, noise, film, np.float32(threshold), active,
                                                            counter)
     return device.read(active, (h, w), np.int32), int(device.read(counter, 1, np.int32)[0])
 
@@ -46,7 +48,7 @@ def test_noise_measure_matches_cycles_formula_on_both_sides_of_the_threshold(dev
     for level in (0.25, 0.9):
         combined = np.full((1, 1, 3), level)
         even = combined + np.array([0.01, -0.02, 0.005])
-        error = noise(combined[0, 0], even[0, 0])
+        error = noise_of(combined[0, 0], even[0, 0])
         above, count_above = active_after(device, combined, even, np.full((1, 1), 4), error * 0.999, 16)
         below, count_below = active_after(device, combined, even, np.full((1, 1), 4), error * 1.001, 16)
         assert (above[0, 0], count_above, below[0, 0], count_below) == (1, 1, 0, 0)
@@ -72,6 +74,23 @@ def test_a_noisy_pixel_keeps_its_3x3_neighbourhood_sampling_until_the_limit(devi
     even[0, 0] += 0.2
     active, count = active_after(device, combined, even, np.full((h, w), 8), 0.05, 16)
     assert count == 4 and active[:2, :2].all()
+
+
+def test_only_the_pixels_that_took_samples_have_their_noise_measured_again(device):
+    h, w = 4, 5
+    rng = np.random.default_rng(2)
+    combined, even = rng.uniform(0.1, 2.0, (h, w, 3)), rng.uniform(0.1, 2.0, (h, w, 3))
+    job = np.zeros(1, IMAGE_JOB_DTYPE)
+    job["window"] = (w, h, w * h, 0)
+    rows = lambda rgb: np.concatenate([rgb, np.ones((h, w, 1))], -1).reshape(-1, 4).astype(np.float32)
+    sampled = (np.indices((h, w)).sum(axis=0) % 2).astype(np.int32)  # a checkerboard took the round
+    noise = device.to_device(np.full(h * w, -1.0, np.float32))
+    device.kernel("image.cl", "Image_noise_of", {})(w * h, job, device.to_device(rows(combined)),
+                                                    device.to_device(rows(even)), device.to_device(sampled), noise)
+    kept = device.read(noise, (h, w), np.float32)
+    expected = np.array([[noise_of(combined[y, x], even[y, x]) for x in range(w)] for y in range(h)])
+    np.testing.assert_allclose(kept[sampled == 1], expected[sampled == 1], rtol=1e-5)
+    assert (kept[sampled == 0] == -1.0).all()
 
 
 def lit_plane(light):
