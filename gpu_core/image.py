@@ -244,24 +244,34 @@ def _launch_round(device: Device, kernel, args: list, job, size: tuple[int, int]
                   settings: RenderSettings, report, should_stop) -> tuple[int, int]:
     """The image kernel over every pixel of the window of ``size`` (``args``:
     its arguments, ``job`` among them), in launches of sizes from the ladder,
-    each sized by the speed of the one before; ``report(pixels done)``
-    after each, a stop request seen between them. The next launch's size
-    and the number of launches."""
+    each sized by the speed of the last one finished; ``report(pixels
+    done)`` after each, a stop request seen between them. Each launch is
+    queued while the one before runs, so the device does not wait for the
+    host between them (a stop waits for the running launch and the one
+    queued behind it). The next launch's size and the number of launches."""
     (w, h), start, launches = size, 0, 0
-    while start < w * h:
-        pixels = min(batch, w * h - start)
-        job["window"] = (w, h, pixels, start)
-        began = time.perf_counter()
-        kernel(pixels, *args)
-        device.queue.finish()
-        elapsed = time.perf_counter() - began
-        start += pixels
-        launches += 1
-        report(start)
+    running = None  # (event, pixels, pixels done once it ends) of the launch queued before
+    began = time.perf_counter()
+    while True:
+        queued = None
         if start < w * h:
-            check_stop(should_stop)
-        batch = _ladder(int(pixels * min(settings.batch_seconds / max(elapsed, 1e-4), 4.0)), settings.batch_pixels)
-    return batch, launches
+            pixels = min(batch, w * h - start)
+            job["window"] = (w, h, pixels, start)
+            start += pixels
+            launches += 1
+            queued = (kernel(pixels, *args), pixels, start)
+        if running is not None:
+            event, pixels, done = running
+            event.wait()
+            now = time.perf_counter()
+            elapsed, began = now - began, now  # it ran from the end of the one before
+            report(done)
+            if queued is not None:
+                check_stop(should_stop)
+            batch = _ladder(int(pixels * min(settings.batch_seconds / max(elapsed, 1e-4), 4.0)), settings.batch_pixels)
+        if queued is None:
+            return batch, launches
+        running = queued
 
 
 def _round_limit(settings: RenderSettings, rounds: tuple[int, int] | None) -> int:

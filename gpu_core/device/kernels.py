@@ -60,22 +60,25 @@ class Kernel:
         self._lock = threading.Lock()
         self._typed = False
 
-    def __call__(self, n: int, *args) -> None:
-        """``n`` work-items (none when ``n`` <= 0), in groups of the fixed local size."""
+    def __call__(self, n: int, *args) -> cl.Event | None:
+        """``n`` work-items (none when ``n`` <= 0), in groups of the fixed
+        local size; the launch's event."""
         if n > 0:
-            self._enqueue(-(-int(n) // self.local) * self.local, self.local, args)
+            return self._enqueue(-(-int(n) // self.local) * self.local, self.local, args)
+        return None
 
-    def groups(self, count: int, group: int, *args) -> None:
-        """``count`` work-groups of ``group`` work-items (kernels with barriers)."""
+    def groups(self, count: int, group: int, *args) -> cl.Event | None:
+        """``count`` work-groups of ``group`` work-items (kernels with barriers); the launch's event."""
         if count > 0:
-            self._enqueue(int(count) * group, group, args)
+            return self._enqueue(int(count) * group, group, args)
+        return None
 
-    def _enqueue(self, global_size: int, group: int, args) -> None:
+    def _enqueue(self, global_size: int, group: int, args) -> cl.Event:
         with self._lock:
             if not self._typed:
                 self._declare_scalars(args)
             self.kernel.set_args(*args)
-            cl.enqueue_nd_range_kernel(self.queue, self.kernel, grid(global_size, group), (group, 1))
+            return cl.enqueue_nd_range_kernel(self.queue, self.kernel, grid(global_size, group), (group, 1))
 
     def _declare_scalars(self, args) -> None:
         """Tell pyopencl the types of the scalar arguments (numpy scalars on
