@@ -339,7 +339,7 @@ def _serial_build(device: Device, points: cla.Array, photons: tuple | None, para
         result = device.array(8, np.int32)
         radius = -1.0 if params.radius is None else max(float(params.radius), 0.0)
         kernel = device.kernel(PROGRAM, "PointBuild_serial")
-        group = params.serial_group or (1 if device.is_cpu else kernel.local)
+        group = params.serial_group or kernel.lone_group(device.is_cpu)
         kernel.groups(1, group, i32(n), i32(large), i32(bound), i32(capacity), f32(params.empty_ratio),
                       state.max_depth, f32(params.k_hint), f32(radius), f32(params.cost_traverse), nodes.data,
                       state.work.data, state.scratch.data, device.array(bound, CHUNK_DTYPE).data,

@@ -73,6 +73,13 @@ class Kernel:
             return self._enqueue(int(count) * group, group, args)
         return None
 
+    def lone_group(self, cpu: bool, most: int | None = None) -> int:
+        """Work-items of the one work-group of a launch that shares its work
+        among them (``groups(1, ...)``): one on a CPU device, whose
+        work-items run one after another (one does it all, with no barrier
+        to wait at), else the fixed local size, at most ``most``."""
+        return 1 if cpu else min(self.local, most or self.local)
+
     def _enqueue(self, global_size: int, group: int, args) -> cl.Event:
         with self._lock:
             if not self._typed:

@@ -239,7 +239,7 @@ def sort_pairs(device: Device, keys: cl.Buffer, values: cl.Buffer | None, n: int
     spare = [(device.empty(4 * n), device.empty(4 * n)), (device.empty(4 * n), device.empty(4 * n))]
     if n <= (sort_group_max(device) if group_max is None else group_max):
         kernel = _k(device, "Prim_radix_sort_group")
-        group = 1 if device.is_cpu else min(kernel.local, PRIM_SORT_GROUP)
+        group = kernel.lone_group(device.is_cpu, PRIM_SORT_GROUP)
         kernel.groups(1, group, keys, values, np.int32(values is None), np.int32(n), np.int32(passes), *spare[0],
                       *spare[1])
         return spare[(passes - 1) % 2]

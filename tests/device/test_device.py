@@ -359,3 +359,10 @@ def test_freeing_held_memory_gives_unused_buffers_back(device):
     data = np.arange(1 << 18, dtype=np.int32)
     device.write(kept, data)
     assert (device.read(kept, data.shape, np.int32) == data).all()
+
+
+def test_a_lone_work_group_is_one_work_item_on_a_cpu_and_the_local_size_elsewhere(device):
+    kernel = device.kernel("device/primitives.cl", "Prim_radix_sort_group")
+    assert kernel.lone_group(True) == 1 and kernel.lone_group(True, 8) == 1
+    assert kernel.lone_group(False) == kernel.local
+    assert kernel.lone_group(False, 8) == min(kernel.local, 8)
