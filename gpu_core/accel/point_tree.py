@@ -23,6 +23,8 @@ from ..device.timer import StageTimer
 from .point_tree_build import BuildParams, BuiltTree, build, points_on_device
 
 FILTERS = {"box": PHOTON_FILTER_BOX, "cone": PHOTON_FILTER_CONE, "epanechnikov": PHOTON_FILTER_EPANECHNIKOV}
+DENSITY_FILTER = "epanechnikov"  # the density estimates' filter, unless told
+DENSITY_NORMAL_COS = 0.5  # photons stored on surfaces turned further away from the point's do not count
 MAX_K = 1024  # the candidate list lives in private memory
 _ROWS_PER_LAUNCH = 1 << 21  # queries per kNN launch
 _PROGRAM = "accel/point_tree_query.cl"
@@ -44,6 +46,17 @@ def query_defines(k: int) -> dict:
 def query_programs(k: int) -> list[tuple[str, dict]]:
     """The query program for searches of ``k`` neighbours (for building it up front)."""
     return [(_PROGRAM, query_defines(k))]
+
+
+def search_d2(max_radius: float | None) -> np.float32:
+    """The squared search radius the query kernels take for ``max_radius``
+    (None: unbounded)."""
+    if max_radius is None:
+        return np.float32(np.inf)
+    r = float(max_radius)
+    if not r >= 0:
+        raise ValueError(f"max_radius must be >= 0, not {max_radius}")
+    return np.float32(min(r * r, np.finfo(np.float32).max)) if np.isfinite(r) else np.float32(np.inf)
 
 
 def _as_points(array, name: str) -> np.ndarray:
@@ -187,15 +200,6 @@ class PointTree:
         return self.device.kernel(_PROGRAM, name, query_defines(k))
 
     @staticmethod
-    def _max_d2(max_radius) -> np.float32:
-        if max_radius is None:
-            return np.float32(np.inf)
-        r = float(max_radius)
-        if not r >= 0:
-            raise ValueError(f"max_radius must be >= 0, not {max_radius}")
-        return np.float32(min(r * r, np.finfo(np.float32).max)) if np.isfinite(r) else np.float32(np.inf)
-
-    @staticmethod
     def _check_k(k) -> int:
         k = int(k)
         if not 1 <= k <= MAX_K:
@@ -215,7 +219,7 @@ class PointTree:
             return idx, d2
         dev = self.device
         kernel = self._kernel("PointTree_knn_batch", k)
-        max_d2 = self._max_d2(max_radius)
+        max_d2 = search_d2(max_radius)
         # batches of whole rows that fit one device allocation
         rows = max(1, min(m, dev.max_alloc_bytes // (8 * k), _ROWS_PER_LAUNCH))
         out_i = dev.empty(min(rows, m) * k * 4)
@@ -230,7 +234,7 @@ class PointTree:
         return idx, d2
 
     def irradiance(self, positions: np.ndarray, normals: np.ndarray, k: int, max_radius: float | None = None,
-                   filter: str = "epanechnikov", normal_cos: float = 0.5, albedo: np.ndarray | None = None) -> np.ndarray:
+                   filter: str = DENSITY_FILTER, normal_cos: float = DENSITY_NORMAL_COS, albedo: np.ndarray | None = None) -> np.ndarray:
         """Irradiance (M, 3) in W/m^2 at surface points with unit ``normals``,
         from the ``k`` nearest photons (within ``max_radius``) and a
         ``filter`` ("box", "cone" or "epanechnikov"). Photons from behind the
@@ -257,7 +261,7 @@ class PointTree:
         order = _spatial_order(pos[:, :3]).astype(np.int32)
         self._kernel("PointTree_density_batch", k)(
             m, *self.kernel_args(), *photon_args, dev.to_device(pos), dev.to_device(nrm), dev.to_device(alb),
-            dev.to_device(order), self._max_d2(max_radius), np.int32(k), np.int32(FILTERS[filter]), np.float32(normal_cos),
+            dev.to_device(order), search_d2(max_radius), np.int32(k), np.int32(FILTERS[filter]), np.float32(normal_cos),
             np.int32(albedo is not None), np.int32(m), buf)
         dev.to_host(buf, out)
         return out[:, :3]
@@ -268,7 +272,7 @@ class PointTree:
         return self.irradiance(positions, normals, k, albedo=albedo, **options)
 
     def irradiance_on_device(self, positions: cl.Buffer, normals: cl.Buffer, n: int, k: int, out: cl.Buffer,
-                             filter: str = "epanechnikov", normal_cos: float = 0.5,
+                             filter: str = DENSITY_FILTER, normal_cos: float = DENSITY_NORMAL_COS,
                              max_radius: float | None = None) -> None:
         """Irradiance (float4 rows into ``out``) at ``n`` surface points
         whose float4 positions and unit normals are on the device, in their
@@ -276,7 +280,7 @@ class PointTree:
         ``k`` nearest photons within ``max_radius``."""
         k = self._check_k(k)
         self._kernel("PointTree_density_batch", k)(
-            n, *self.kernel_args(), *self.photon_args(), positions, normals, None, None, self._max_d2(max_radius),
+            n, *self.kernel_args(), *self.photon_args(), positions, normals, None, None, search_d2(max_radius),
             np.int32(k), np.int32(FILTERS[filter]), np.float32(normal_cos), np.int32(0), np.int32(n), out)
 
 

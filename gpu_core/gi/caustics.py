@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..accel.point_tree import FILTERS, PointTree, query_defines
+from ..accel.point_tree import DENSITY_FILTER, DENSITY_NORMAL_COS, FILTERS, PointTree, query_defines, search_d2
 from .cut import caustic_max_radius
 from .shading_points import ShadingPoints
 
@@ -26,8 +26,6 @@ _PROGRAM = "gi/caustics.cl"
 ANCHOR_SPACING = 4  # pixels between the anchors estimated first (a power of two)
 SPAN = 0.2  # anchors within this fraction of their estimate's radius stand in for the slots between them
 SAME_SURFACE_COS = 0.95  # anchors whose normal is within acos(this) of the slot's lie on its surface
-FILTER = "epanechnikov"  # the estimate's filter (accel/point_density.h)
-NORMAL_COS = 0.5  # photons stored on surfaces turned further away do not count
 
 
 def programs(k: int) -> list[tuple[str, dict]]:
@@ -41,12 +39,15 @@ def irradiance(caustic_map: PointTree, points: ShadingPoints, k: int) -> cl.Buff
     device = points.device
     sub2, width, height = points.subpixels**2, points.width, points.height
     grid = device.empty(16 * points.grid_size)
-    max_d2 = PointTree._max_d2(caustic_max_radius(caustic_map))
+    max_d2 = search_d2(caustic_max_radius(caustic_map))
     common = (*caustic_map.kernel_args(), *caustic_map.photon_args(), points.grid_pos, points.grid_nrm,
-              np.int32(width), np.int32(height), np.int32(sub2), max_d2, np.int32(k), np.int32(FILTERS[FILTER]),
-              np.float32(NORMAL_COS))
+              np.int32(width), np.int32(height), np.int32(sub2), max_d2, np.int32(k), np.int32(FILTERS[DENSITY_FILTER]),
+              np.float32(DENSITY_NORMAL_COS))
     spacing = ANCHOR_SPACING
-    lattice = lambda apart: -(-width // apart) * -(-height // apart) * sub2  # noqa: E731 (slots `apart` pixels apart)
+
+    def lattice(apart: int) -> int:  # the slots of the pixels `apart` apart in rows and columns
+        return -(-width // apart) * -(-height // apart) * sub2
+
     device.kernel(_PROGRAM, "Caustics_anchors", query_defines(k))(lattice(spacing), *common, np.int32(spacing), grid)
     while spacing > 1:  # each level fills the lattice half as far apart from the one before
         device.kernel(_PROGRAM, "Caustics_fill", query_defines(k))(
